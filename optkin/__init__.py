@@ -1,0 +1,32 @@
+"""optkin: kinematics of closed-chain and parallel robots as constrained optimization.
+
+Describe a mechanism (a Khalil-Kleinfinger table or a parallel platform by its legs), and
+optkin compiles it once into CasADi Functions and solves its direct and inverse geometric
+models, returning result objects that say what happened.
+"""
+
+from . import mechanisms
+from .errors import MechanismError, OptkinError, ProblemFileError, SolverError
+from .mechanism import Leg, Mechanism
+from .model import get_model
+from .results import KinResult, SolutionSet, SolverStats
+from .solvers import forward, inverse
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "KinResult",
+    "Leg",
+    "Mechanism",
+    "MechanismError",
+    "OptkinError",
+    "ProblemFileError",
+    "SolutionSet",
+    "SolverError",
+    "SolverStats",
+    "__version__",
+    "forward",
+    "get_model",
+    "inverse",
+    "mechanisms",
+]

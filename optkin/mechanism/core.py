@@ -1,0 +1,299 @@
+"""The :class:`Mechanism`: an immutable description, either a Khalil table or legs."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..errors import MechanismError
+from .khalil import KhalilTable
+from .legs import PLATFORMS, Leg, validate_legs
+
+__all__ = ["Mechanism", "TASK_COMPONENTS"]
+
+#: Pose components an inverse problem may prescribe for a Khalil mechanism.
+TASK_COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, (np.floating, np.integer)):
+        return v.item()
+    if isinstance(v, Mapping):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    return v
+
+
+class Mechanism:
+    """A closed-chain or parallel mechanism (plain data, validated on construction).
+
+    Build one with :meth:`from_khalil`, :meth:`from_legs` or a factory of
+    :mod:`optkin.mechanisms`. Its compiled CasADi model lives beside it (see
+    :func:`optkin.model.get_model`), keyed by :attr:`key`.
+
+    Attributes
+    ----------
+    joint_names : tuple of str
+        Every joint variable, in the order of ``KinResult.q``.
+    actuated : tuple of bool
+        Whether each joint is actuated.
+    dof : int
+        The number of degrees of freedom the mechanism is meant to have (= active joints).
+    """
+
+    __slots__ = (
+        "name", "kind", "joint_names", "actuated", "revolute", "dof", "planar", "table",
+        "end_effector", "task", "legs", "platform", "home", "params", "_spec", "_key",
+        "__weakref__",
+    )
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if getattr(self, "_key", None) is not None:
+            raise AttributeError("a Mechanism is immutable; build a new one")
+        object.__setattr__(self, name, value)
+
+    # ------------------------------------------------------------------ builders
+    @classmethod
+    def from_khalil(
+        cls,
+        rows: Sequence[Any],
+        loops: int = 0,
+        params: Mapping[str, float] | None = None,
+        end_effector: int | None = None,
+        name: str = "khalil",
+        task: Sequence[str] | None = None,
+        home: Mapping[str, float] | Sequence[float] | None = None,
+        dof: int | None = None,
+    ) -> Mechanism:
+        """A mechanism from its Khalil table (seed 000, Tables 7.1 and 7.2).
+
+        Parameters
+        ----------
+        rows : sequence of mappings
+            One row per frame j = 1..n+2B with keys a, mu, sigma, gamma, b, alpha, d, theta, r.
+        loops : int
+            B, the number of loops; the last 2B rows are the cut joints then their partner
+            frames k+B (sigma = 2).
+        params : mapping
+            Values of named parameters used in the rows (``{"d3": 0.6}``).
+        end_effector : int
+            The frame whose pose is the end-effector pose (default: the last tree frame n).
+        task : sequence of str
+            The pose components an inverse problem prescribes, from ``x y z rx ry rz``
+            (default all six when dof >= 6, else the first dof of ``rz x y z rx ry``).
+        home : mapping or sequence
+            Default guess for the passive joints (by name, or all joints in order).
+        dof : int
+            The intended number of degrees of freedom (default: number of actuated joints).
+
+        Examples
+        --------
+        >>> rows = [dict(a=0, mu=1, sigma=0, gamma=0, b=0, alpha=0, d=0, theta="t1", r=0)]
+        >>> Mechanism.from_khalil(rows).joint_names
+        ('t1',)
+        """
+        table = KhalilTable(rows, loops=loops, params=params)
+        joints = table.joints
+        m = object.__new__(cls)
+        m.kind = "khalil"
+        m.name = str(name)
+        m.table = table
+        m.joint_names = tuple(f.name for f in joints)  # type: ignore[misc]
+        m.actuated = tuple(bool(f.mu) for f in joints)
+        m.revolute = tuple(f.sigma == 0 for f in joints)
+        nact = sum(m.actuated)
+        if nact == 0:
+            raise MechanismError("rows: no joint is actuated; set mu=1 on the active joints")
+        m.dof = int(dof) if dof is not None else nact
+        if m.dof != nact:
+            raise MechanismError(
+                f"dof: the mechanism is meant to have {m.dof} degrees of freedom but "
+                f"{nact} joints are actuated (mu=1); actuate exactly one joint per degree of freedom"
+            )
+        ee = table.n if end_effector is None else end_effector
+        if isinstance(ee, bool) or not isinstance(ee, (int, np.integer)) or not 1 <= ee <= table.n:
+            raise MechanismError(
+                f"end_effector: {end_effector!r} is not a tree frame; give a frame number in "
+                f"1..{table.n}"
+            )
+        m.end_effector = int(ee)
+        if task is None:
+            order = ("x", "y", "z", "rx", "ry", "rz") if m.dof >= 6 else ("rz", "x", "y", "z", "rx", "ry")
+            task = order[: min(6, m.dof)]
+        task = tuple(str(t) for t in task)
+        bad = [t for t in task if t not in TASK_COMPONENTS]
+        if bad or len(set(task)) != len(task):
+            raise MechanismError(
+                f"task: {list(task)} must name distinct components among {list(TASK_COMPONENTS)}"
+            )
+        m.task = task
+        m.planar = False
+        m.legs = ()
+        m.platform = None
+        m.params = dict(table.params)
+        m.home = m._home_vector(home)
+        m._spec = {
+            "kind": "khalil",
+            "name": m.name,
+            "rows": table.rows_source,
+            "loops": table.loops,
+            "params": table.params,
+            "end_effector": m.end_effector,
+            "task": list(task),
+            "home": None if m.home is None else m.home.tolist(),
+            "dof": m.dof,
+        }
+        m._finish()
+        return m
+
+    @classmethod
+    def from_legs(
+        cls,
+        legs: Sequence[Mapping[str, Any] | Leg],
+        platform: str = "planar",
+        name: str = "legs",
+        home: Sequence[float] | None = None,
+        params: Mapping[str, Any] | None = None,
+    ) -> Mechanism:
+        """A parallel platform from its legs (see :mod:`optkin.mechanism.legs`).
+
+        Parameters
+        ----------
+        legs : sequence of mappings
+            ``{"type": "RPR", "base": [x, y], "platform": [x, y]}``, with ``lengths`` for
+            RRR/RUS legs and ``axis``/``arm`` for RUS legs.
+        platform : str
+            ``planar`` (x, y, phi), ``planar_point`` (x, y), ``spatial``
+            (x, y, z, roll, pitch, yaw) or ``spatial_translational`` (x, y, z).
+        home : sequence
+            A pose (task coordinates) used as the default guess of :func:`optkin.forward`.
+        """
+        legs_t = validate_legs(legs, platform)
+        m = object.__new__(cls)
+        m.kind = "legs"
+        m.name = str(name)
+        m.legs = legs_t
+        m.platform = platform
+        dim, dof, coords = PLATFORMS[platform]
+        names, act, rev = [], [], []
+        for i, leg in enumerate(legs_t):
+            for k, jn in enumerate(leg.joint_names):
+                names.append(f"L{i + 1}.{jn}")
+                act.append(k == leg.actuated_index)
+                rev.append(jn != "rho")
+        m.joint_names = tuple(names)
+        m.actuated = tuple(act)
+        m.revolute = tuple(rev)
+        m.dof = dof
+        m.planar = dim == 2
+        m.table = None
+        m.end_effector = None
+        m.task = coords
+        m.params = dict(params or {})
+        if home is None:
+            m.home = None
+        else:
+            h = np.asarray(home, dtype=float)
+            if h.shape != (dof,) or not np.all(np.isfinite(h)):
+                raise MechanismError(
+                    f"home: expected {dof} finite task coordinates {list(coords)}, got {home!r}"
+                )
+            m.home = h
+        m._spec = {
+            "kind": "legs",
+            "name": m.name,
+            "platform": platform,
+            "legs": [leg.to_dict() for leg in legs_t],
+            "home": None if m.home is None else m.home.tolist(),
+        }
+        m._finish()
+        return m
+
+    # ------------------------------------------------------------------ helpers
+    def _home_vector(self, home: Any) -> np.ndarray | None:
+        if home is None:
+            return None
+        if isinstance(home, Mapping):
+            unknown = sorted(set(home) - set(self.joint_names))
+            if unknown:
+                raise MechanismError(f"home: unknown joint(s) {unknown}; joints: {self.joint_names}")
+            return np.array([float(home.get(n, 0.0)) for n in self.joint_names])
+        h = np.asarray(home, dtype=float)
+        if h.shape != (len(self.joint_names),):
+            raise MechanismError(f"home: expected {len(self.joint_names)} joint values")
+        return h
+
+    def _finish(self) -> None:
+        blob = json.dumps(_jsonable(self._spec), sort_keys=True).encode()
+        object.__setattr__(self, "_key", hashlib.sha256(blob).hexdigest()[:16])
+
+    # ------------------------------------------------------------------ views
+    @property
+    def key(self) -> str:
+        """A content hash: equal descriptions share compiled models."""
+        return self._key
+
+    @property
+    def active_names(self) -> tuple[str, ...]:
+        return tuple(n for n, a in zip(self.joint_names, self.actuated) if a)
+
+    @property
+    def active_index(self) -> np.ndarray:
+        return np.flatnonzero(self.actuated)
+
+    @property
+    def cut_names(self) -> tuple[str, ...]:
+        """Cut joint variables q_c ([7.7]); empty for leg-described platforms."""
+        if self.kind != "khalil":
+            return ()
+        cut = set(self.table.cut_frames)
+        return tuple(f.name for f in self.table.joints if f.j in cut)  # type: ignore[misc]
+
+    @property
+    def passive_names(self) -> tuple[str, ...]:
+        """Passive joints of the tree, q_p ([7.7])."""
+        cut = set(self.cut_names)
+        return tuple(n for n, a in zip(self.joint_names, self.actuated) if not a and n not in cut)
+
+    @property
+    def task_dim(self) -> int:
+        return len(self.task)
+
+    @property
+    def n_loops(self) -> int:
+        return self.table.loops if self.kind == "khalil" else len(self.legs) - 1
+
+    def to_dict(self) -> dict[str, Any]:
+        """The description as JSON-ready data (echoed in problem results)."""
+        return _jsonable(self._spec)
+
+    def __repr__(self) -> str:
+        return (
+            f"Mechanism({self.name!r}, {self.kind}, dof={self.dof}, "
+            f"joints={len(self.joint_names)}, active={list(self.active_names)})"
+        )
+
+    def __reduce__(self):
+        spec = self._spec
+        if spec["kind"] == "khalil":
+            return (
+                _rebuild_khalil,
+                (spec["rows"], spec["loops"], spec["params"], spec["end_effector"], spec["name"],
+                 spec["task"], None if self.home is None else self.home.tolist(), self.dof),
+            )
+        return (_rebuild_legs, (spec["legs"], spec["platform"], spec["name"], spec["home"]))
+
+
+def _rebuild_khalil(rows, loops, params, ee, name, task, home, dof):
+    return Mechanism.from_khalil(rows, loops, params, ee, name, task, home, dof)
+
+
+def _rebuild_legs(legs, platform, name, home):
+    return Mechanism.from_legs(legs, platform, name, home)

@@ -1,0 +1,73 @@
+"""Task coordinates (the pose vector a user types) and 4x4 poses."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..errors import MechanismError
+from .geometry import homogeneous, matrix_to_rpy, rot2, rot_x, rot_y, rot_z, rpy_to_matrix
+
+__all__ = ["task_to_pose", "pose_to_task", "as_pose"]
+
+
+def task_to_pose(mech: Any, t: Any) -> np.ndarray:
+    """The 4x4 pose of task coordinates ``t`` (see ``mech.task``).
+
+    planar: (x, y, phi); planar_point: (x, y); spatial: (x, y, z, roll, pitch, yaw) with
+    R = Rz(yaw) Ry(pitch) Rx(roll); spatial_translational: (x, y, z). Khalil mechanisms:
+    the components named in ``mech.task`` (positions; rotation angles about base axes).
+    """
+    t = np.asarray(t, dtype=float).ravel()
+    if t.size != len(mech.task) or not np.all(np.isfinite(t)):
+        raise MechanismError(
+            f"pose: expected a 4x4 matrix or {len(mech.task)} finite task coordinates "
+            f"{list(mech.task)}, got {np.asarray(t).tolist()}"
+        )
+    if mech.kind == "legs":
+        plat = mech.platform
+        if plat == "planar":
+            return homogeneous(rot2(t[2]), t[:2])
+        if plat == "planar_point":
+            return homogeneous(np.eye(2), t[:2])
+        if plat == "spatial":
+            return homogeneous(rpy_to_matrix(t[3], t[4], t[5]), t[:3])
+        return homogeneous(np.eye(3), t[:3])
+    vals = dict(zip(mech.task, t))
+    p = np.array([vals.get("x", 0.0), vals.get("y", 0.0), vals.get("z", 0.0)])
+    R = rot_z(vals.get("rz", 0.0)) @ rot_y(vals.get("ry", 0.0)) @ rot_x(vals.get("rx", 0.0))
+    return homogeneous(R, p)
+
+
+def pose_to_task(mech: Any, T: np.ndarray) -> np.ndarray:
+    """Task coordinates of a 4x4 pose (inverse of :func:`task_to_pose`)."""
+    T = np.asarray(T, dtype=float)
+    if mech.kind == "legs":
+        plat = mech.platform
+        if plat == "planar":
+            return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
+        if plat == "planar_point":
+            return T[:2, 3].copy()
+        if plat == "spatial":
+            return np.concatenate([T[:3, 3], matrix_to_rpy(T[:3, :3])])
+        return T[:3, 3].copy()
+    rpy = matrix_to_rpy(T[:3, :3])
+    comp = {"x": T[0, 3], "y": T[1, 3], "z": T[2, 3], "rx": rpy[0], "ry": rpy[1], "rz": rpy[2]}
+    return np.array([comp[c] for c in mech.task])
+
+
+def as_pose(mech: Any, pose: Any) -> np.ndarray:
+    """A 4x4 pose from either a 4x4 matrix or task coordinates."""
+    try:
+        a = np.asarray(pose, dtype=float)
+    except (TypeError, ValueError):
+        raise MechanismError(f"pose: expected numbers, got {pose!r}") from None
+    if a.shape == (4, 4):
+        if not np.all(np.isfinite(a)):
+            raise MechanismError("pose: the 4x4 matrix has non-finite entries")
+        R = a[:3, :3]
+        if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or abs(np.linalg.det(R) - 1) > 1e-6:
+            raise MechanismError("pose: the rotation block of the 4x4 matrix is not a rotation")
+        return a
+    return task_to_pose(mech, a)

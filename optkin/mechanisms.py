@@ -1,0 +1,261 @@
+"""The library of canonical mechanisms.
+
+Each factory returns a validated :class:`~optkin.mechanism.Mechanism`; tests, benchmarks and
+``problems/`` share them. :data:`LIBRARY` maps names to factories (used by problem files).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from .errors import MechanismError
+from .mechanism import Mechanism
+
+__all__ = [
+    "rpr3", "rrr3", "five_bar", "four_bar", "stewart_gough", "delta", "sr400", "akr3000",
+    "LIBRARY",
+]
+
+
+def _points(a: Any, shape: tuple[int, int], name: str) -> np.ndarray:
+    try:
+        p = np.asarray(a, dtype=float)
+    except (TypeError, ValueError):
+        raise MechanismError(f"{name}: expected an array of shape {shape}, got {a!r}") from None
+    if p.shape != shape:
+        raise MechanismError(f"{name}: expected an array of shape {shape}, got shape {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise MechanismError(f"{name}: expected finite numbers")
+    return p
+
+
+def _lengths(v: Any, n: int, name: str) -> np.ndarray:
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise MechanismError(f"{name}: expected a positive number or {n} of them, got {v!r}") from None
+    if a.ndim == 0:
+        a = np.full(n, float(a))
+    if a.shape != (n,):
+        raise MechanismError(f"{name}: expected a positive number or {n} of them, got shape {a.shape}")
+    if not np.all(np.isfinite(a)) or np.any(a <= 0):
+        raise MechanismError(f"{name}: lengths must be positive and finite, got {a.tolist()}")
+    return a
+
+
+def _positive(name: str, v: Any) -> float:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        raise MechanismError(f"{name}: expected a positive number, got {v!r}") from None
+    if not np.isfinite(f) or f <= 0:
+        raise MechanismError(f"{name}: expected a positive length, got {v!r}")
+    return f
+
+
+def _finite(name: str, v: Any) -> float:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        raise MechanismError(f"{name}: expected a number, got {v!r}") from None
+    if not np.isfinite(f):
+        raise MechanismError(f"{name}: expected a finite number, got {v!r}")
+    return f
+
+
+def rpr3(base: Any, platform: Any, home: Sequence[float] | None = None) -> Mechanism:
+    """Planar 3-RPR: base (3, 2) joint centres, platform (3, 2) in the platform frame.
+
+    q_a = the three leg lengths; the pose is the platform frame (x, y, phi).
+
+    >>> m = rpr3([[0, 0], [1, 0], [0, 1]], [[0, 0], [0.2, 0], [0, 0.2]])
+    >>> m.active_names
+    ('L1.rho', 'L2.rho', 'L3.rho')
+    """
+    b = _points(base, (3, 2), "base")
+    p = _points(platform, (3, 2), "platform")
+    legs = [{"type": "RPR", "base": b[i], "platform": p[i]} for i in range(3)]
+    return Mechanism.from_legs(legs, "planar", name="3-RPR", home=home)
+
+
+def rrr3(
+    base: Any, platform: Any, proximal: Any, distal: Any, home: Sequence[float] | None = None
+) -> Mechanism:
+    """Planar 3-RRR with actuated base revolutes; link lengths scalars or one per leg."""
+    b = _points(base, (3, 2), "base")
+    p = _points(platform, (3, 2), "platform")
+    l1 = _lengths(proximal, 3, "proximal")
+    l2 = _lengths(distal, 3, "distal")
+    legs = [
+        {"type": "RRR", "base": b[i], "platform": p[i], "lengths": [l1[i], l2[i]]}
+        for i in range(3)
+    ]
+    return Mechanism.from_legs(legs, "planar", name="3-RRR", home=home)
+
+
+def five_bar(L0: float, L1: float, L2: float, L3: float, L4: float) -> Mechanism:
+    """The RR-RRR five-bar of Chablat and Wenger (seed 004).
+
+    Base joints A = (0, 0) and B = (L0, 0); |AC| = L1, |CP| = L2, |PD| = L3, |DB| = L4;
+    q_a = (theta1 at A, theta2 at B), angles from the x axis; the end effector is P.
+    """
+    L0 = _positive("L0", L0)
+    L1, L2, L3, L4 = (_positive(n, v) for n, v in zip(("L1", "L2", "L3", "L4"), (L1, L2, L3, L4)))
+    legs = [
+        {"type": "RRR", "base": [0.0, 0.0], "platform": [0.0, 0.0], "lengths": [L1, L2]},
+        {"type": "RRR", "base": [L0, 0.0], "platform": [0.0, 0.0], "lengths": [L4, L3]},
+    ]
+    reach = min(L1 + L2, L3 + L4)
+    return Mechanism.from_legs(legs, "planar_point", name="five-bar",
+                               home=[L0 / 2, 0.6 * reach])
+
+
+def four_bar(L1: float, L2: float, L3: float, L4: float) -> Mechanism:
+    """The planar four-bar of Modern Robotics 7.3, as a Khalil table with one loop.
+
+    Ground A = (0, 0) to D = (L4, 0); input crank L1 at angle ``theta`` (actuated);
+    coupler L2; rocker L3 at D at absolute angle ``phi``. The loop is cut at the
+    coupler-rocker joint (frame 4, partner frame 5 on the rocker). End effector: the rocker
+    frame (task ``rz``, so ``inverse`` gives the crank angles for a rocker angle).
+    """
+    L1, L2, L3, L4 = (_positive(n, v) for n, v in zip(("L1", "L2", "L3", "L4"), (L1, L2, L3, L4)))
+    rows = [
+        dict(a=0, mu=1, sigma=0, gamma=0, b=0, alpha=0, d=0, theta="theta", r=0),
+        dict(a=1, mu=0, sigma=0, gamma=0, b=0, alpha=0, d="L1", theta="theta2", r=0),
+        dict(a=0, mu=0, sigma=0, gamma=0, b=0, alpha=0, d="L4", theta="phi", r=0),
+        dict(a=2, mu=0, sigma=0, gamma=0, b=0, alpha=0, d="L2", theta="theta4", r=0),
+        dict(a=3, mu=0, sigma=2, gamma=0, b=0, alpha=0, d="L3", theta=0, r=0),
+    ]
+    return Mechanism.from_khalil(
+        rows, loops=1, params={"L1": L1, "L2": L2, "L3": L3, "L4": L4}, end_effector=3,
+        name="four-bar", task=("rz",), home={"theta2": -0.5, "phi": 1.5, "theta4": 1.5},
+    )
+
+
+def stewart_gough(base: Any, platform: Any, home: Sequence[float] | None = None) -> Mechanism:
+    """6-6 Stewart-Gough platform (6-UPS): base (6, 3), platform (6, 3) in the platform frame.
+
+    q_a = the six leg lengths; pose (x, y, z, roll, pitch, yaw).
+    """
+    b = _points(base, (6, 3), "base")
+    p = _points(platform, (6, 3), "platform")
+    legs = [{"type": "UPS", "base": b[i], "platform": p[i]} for i in range(6)]
+    return Mechanism.from_legs(legs, "spatial", name="Stewart-Gough", home=home)
+
+
+def delta(
+    base_radius: float = 0.2,
+    platform_radius: float = 0.05,
+    upper: float = 0.3,
+    lower: float = 0.8,
+) -> Mechanism:
+    """The Delta robot: three RUS legs at 0, 120 and 240 degrees.
+
+    Base revolute i at ``base_radius`` (cos a_i, sin a_i, 0) with its axis tangent to the
+    base circle; the arm of length ``upper`` points radially outwards at theta = 0 and down
+    for theta > 0. Each parallelogram forearm (length ``lower``) is modelled as S-S pairs
+    that keep the platform parallel to the base, so the platform translates (x, y, z); its
+    joint i sits at ``platform_radius`` (cos a_i, sin a_i, 0).
+    """
+    Rb = _positive("base_radius", base_radius)
+    rp = _positive("platform_radius", platform_radius)
+    la = _positive("upper", upper)
+    lb = _positive("lower", lower)
+    legs = []
+    for k in range(3):
+        a = 2 * np.pi * k / 3
+        u = np.array([np.cos(a), np.sin(a), 0.0])
+        legs.append(
+            {
+                "type": "RUS",
+                "base": Rb * u,
+                "platform": rp * u,
+                "lengths": [la, lb],
+                "axis": [-np.sin(a), np.cos(a), 0.0],
+                "arm": u,
+            }
+        )
+    z = -np.sqrt(max(lb**2 - (Rb + la - rp) ** 2, 0.25 * lb**2))
+    return Mechanism.from_legs(legs, "spatial_translational", name="Delta", home=[0.0, 0.0, z])
+
+
+def sr400(
+    d2: float = 0.15, d3: float = 0.6, d4: float = 0.1, d8: float = 0.25, rl4: float = 0.65
+) -> Mechanism:
+    """The Acma SR400 of Table 7.1 (seed 000): six actuated revolutes and a parallelogram.
+
+    d9 = d3 and d10 = -d8 as in the table; the loop is cut at joint 9 (frames 9 and 10).
+    The end effector is frame 6.
+    """
+    params = {"d2": _finite("d2", d2), "d3": _finite("d3", d3), "d4": _finite("d4", d4),
+              "d8": _finite("d8", d8), "RL4": _finite("rl4", rl4)}
+    h = np.pi / 2
+    rows = [
+        dict(a=0, mu=1, sigma=0, gamma=0, b=0, alpha=0, d=0, theta="theta1", r=0),
+        dict(a=1, mu=1, sigma=0, gamma=0, b=0, alpha=-h, d="d2", theta="theta2", r=0),
+        dict(a=2, mu=0, sigma=0, gamma=0, b=0, alpha=0, d="d3", theta="theta3", r=0),
+        dict(a=3, mu=1, sigma=0, gamma=0, b=0, alpha=-h, d="d4", theta="theta4", r="RL4"),
+        dict(a=4, mu=1, sigma=0, gamma=0, b=0, alpha=h, d=0, theta="theta5", r=0),
+        dict(a=5, mu=1, sigma=0, gamma=0, b=0, alpha=-h, d=0, theta="theta6", r=0),
+        dict(a=1, mu=1, sigma=0, gamma=0, b=0, alpha=-h, d="d2", theta="theta7", r=0),
+        dict(a=7, mu=0, sigma=0, gamma=0, b=0, alpha=0, d="d8", theta="theta8", r=0),
+        dict(a=8, mu=0, sigma=0, gamma=0, b=0, alpha=0, d="d3", theta="theta9", r=0),
+        dict(a=3, mu=0, sigma=2, gamma=h, b=0, alpha=0, d="-d8", theta=0, r=0),
+    ]
+    home = {"theta3": np.pi / 2, "theta8": 0.0, "theta9": np.pi}
+    return Mechanism.from_khalil(rows, loops=1, params=params, end_effector=6, name="SR400",
+                                 home=home)
+
+
+def akr3000(
+    d3: float = 0.25,
+    d4: float = 0.45,
+    d7: float = 0.9,
+    r8: float = 0.7,
+    d13: float = 0.3,
+    d14: float = 0.3,
+    gamma13: float = 0.4,
+    gamma14: float = 1.2,
+) -> Mechanism:
+    """The AKR-3000 painting robot of Table 7.2 (seed 000): two loops, 12 joints.
+
+    Active: theta1, r5, r6 (the two cylinders), theta8, theta9, theta10; passive theta2,
+    theta3, theta4, theta7; cut joints theta11 (loop of links 5 and 7) and theta12 (loop of
+    links 2 and 6), partner frames 13 and 14. End effector: frame 10.
+    """
+    params = {k: _finite(k, v) for k, v in dict(d3=d3, d4=d4, d7=d7, r8=r8, d13=d13, d14=d14,
+                                                g13=gamma13, g14=gamma14).items()}
+    h = np.pi / 2
+    rows = [
+        dict(a=0, mu=1, sigma=0, gamma=0, b=0, alpha=0, d=0, theta="theta1", r=0),
+        dict(a=1, mu=0, sigma=0, gamma=0, b=0, alpha=h, d=0, theta="theta2", r=0),
+        dict(a=1, mu=0, sigma=0, gamma=0, b=0, alpha=h, d="d3", theta="theta3", r=0),
+        dict(a=1, mu=0, sigma=0, gamma=0, b=0, alpha=h, d="d4", theta="theta4", r=0),
+        dict(a=3, mu=1, sigma=1, gamma=0, b=0, alpha=-h, d=0, theta=0, r="r5"),
+        dict(a=4, mu=1, sigma=1, gamma=0, b=0, alpha=-h, d=0, theta=0, r="r6"),
+        dict(a=2, mu=0, sigma=0, gamma=0, b=0, alpha=0, d="d7", theta="theta7", r=0),
+        dict(a=7, mu=1, sigma=0, gamma=0, b=0, alpha=-h, d=0, theta="theta8", r="r8"),
+        dict(a=8, mu=1, sigma=0, gamma=0, b=0, alpha=h, d=0, theta="theta9", r=0),
+        dict(a=9, mu=1, sigma=0, gamma=0, b=0, alpha=-h, d=0, theta="theta10", r=0),
+        dict(a=5, mu=0, sigma=0, gamma=0, b=0, alpha=h, d=0, theta="theta11", r=0),
+        dict(a=6, mu=0, sigma=0, gamma=0, b=0, alpha=h, d=0, theta="theta12", r=0),
+        dict(a=7, mu=0, sigma=2, gamma="g13", b=0, alpha=0, d="d13", theta=0, r=0),
+        dict(a=2, mu=0, sigma=2, gamma="g14", b=0, alpha=0, d="d14", theta=0, r=0),
+    ]
+    return Mechanism.from_khalil(rows, loops=2, params=params, end_effector=10, name="AKR-3000")
+
+
+#: name -> factory, for problem files and the command line.
+LIBRARY: dict[str, Callable[..., Mechanism]] = {
+    "rpr3": rpr3,
+    "rrr3": rrr3,
+    "five_bar": five_bar,
+    "four_bar": four_bar,
+    "stewart_gough": stewart_gough,
+    "delta": delta,
+    "sr400": sr400,
+    "akr3000": akr3000,
+}

@@ -1,0 +1,318 @@
+"""Task registry: task kind -> function(mech, params, context) -> JSON-ready dict.
+
+Each function receives the built mechanism, the validated task model of
+:mod:`optkin.problems.schema` and a :class:`TaskContext`; it returns a dict of
+JSON-ready results. A ``"success"`` key (when present) decides between the task
+statuses ``ok`` and ``failed``; a ``"pictures"`` key lists PNG files written into
+``context.picture_dir``.
+
+Library functions are looked up on the :mod:`optkin` module at run time, so a kind
+whose analysis lands in a later version is dispatched to it as soon as it exists;
+until then the task fails with "not available in this version".
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from optkin.problems.schema import TaskBase
+
+__all__ = ["TASKS", "TaskContext", "register", "run_task", "library_function", "jsonable"]
+
+
+@dataclasses.dataclass
+class TaskContext:
+    """Where a task is running and where it may write pictures.
+
+    ``picture_dir`` is None when pictures are not wanted.
+    """
+
+    problem: str
+    index: int
+    picture_dir: Path | None = None
+    stem: str = "problem"
+    notes: list[str] = dataclasses.field(default_factory=list)
+
+    def picture_path(self, suffix: str = "") -> Path | None:
+        """A PNG path for this task (``<stem>.task<i><suffix>.png``), or None."""
+        if self.picture_dir is None:
+            return None
+        return self.picture_dir / f"{self.stem}.task{self.index}{suffix}.png"
+
+
+TaskFunction = Callable[[Any, TaskBase, TaskContext], dict[str, Any]]
+
+#: Task kind -> function. Later issues register their kinds here.
+TASKS: dict[str, TaskFunction] = {}
+
+
+def register(kind: str) -> Callable[[TaskFunction], TaskFunction]:
+    """Decorator registering a task function for ``kind``."""
+
+    def deco(fn: TaskFunction) -> TaskFunction:
+        TASKS[kind] = fn
+        return fn
+
+    return deco
+
+
+def library_function(dotted: str, kind: str) -> Callable[..., Any]:
+    """``optkin.<dotted>`` (e.g. ``"statics.capability"``), or NotImplementedError."""
+    import optkin
+
+    obj: Any = optkin
+    parts = dotted.split(".")
+    for i, part in enumerate(parts):
+        nxt = getattr(obj, part, None)
+        if nxt is None and i < len(parts) - 1:
+            try:  # a submodule not imported by optkin/__init__
+                nxt = importlib.import_module(".".join(["optkin", *parts[: i + 1]]))
+            except ImportError:
+                nxt = None
+        if nxt is None:
+            raise NotImplementedError(
+                f"task kind {kind!r} is not available in this version of optkin "
+                f"(optkin.{dotted} does not exist yet)"
+            )
+        obj = nxt
+    if not callable(obj):
+        raise NotImplementedError(f"task kind {kind!r}: optkin.{dotted} is not callable")
+    return obj
+
+
+def jsonable(v: Any) -> Any:
+    """Recursively turn results (``to_dict`` objects, arrays, numpy scalars) into JSON data."""
+    if hasattr(v, "to_dict") and callable(v.to_dict):
+        return jsonable(v.to_dict())
+    if isinstance(v, np.ndarray):
+        return jsonable(v.tolist())
+    if isinstance(v, (np.floating, np.integer, np.bool_)):
+        return jsonable(v.item())
+    if isinstance(v, float):
+        return v if np.isfinite(v) else None
+    if isinstance(v, (str, int, bool)) or v is None:
+        return v
+    if isinstance(v, Mapping):
+        return {str(k): jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple, set, frozenset)):
+        return [jsonable(x) for x in v]
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        return jsonable(dataclasses.asdict(v))
+    if isinstance(v, Path):
+        return str(v)
+    return repr(v)
+
+
+def _vector(v: Any, names: Sequence[str], fill: Sequence[float] | None = None) -> Any:
+    """A list of numbers from a list or a ``{name: value}`` table (in ``names`` order)."""
+    if v is None:
+        return None
+    if isinstance(v, Mapping):
+        base = list(fill) if fill is not None else [0.0] * len(names)
+        return [float(v[n]) if n in v else base[i] for i, n in enumerate(names)]
+    return [float(x) for x in v]
+
+
+def _pose(v: Any) -> Any:
+    return None if v is None else np.asarray(v, dtype=float)
+
+
+def _task_coordinates(mech: Any, pose: Any) -> list[float] | None:
+    try:
+        from optkin.mechanism.tasks import pose_to_task
+
+        return [float(x) for x in pose_to_task(mech, np.asarray(pose, dtype=float))]
+    except Exception:  # noqa: BLE001 - a convenience field only
+        return None
+
+
+def _draw(mech: Any, what: Any, ctx: TaskContext, suffix: str = "") -> list[str]:
+    """Draw with ``optkin.plot.draw`` when it exists; silently skip otherwise."""
+    path = ctx.picture_path(suffix)
+    if path is None:
+        return []
+    try:
+        draw = library_function("plot.draw", "draw")
+    except NotImplementedError:
+        ctx.notes.append("no picture: optkin.plot.draw is not available in this version")
+        return []
+    try:
+        draw(mech, what, str(path))
+    except Exception as e:  # noqa: BLE001 - a picture never fails a task
+        ctx.notes.append(f"no picture: drawing failed ({type(e).__name__}: {e})")
+        return []
+    return [str(path)] if Path(path).exists() else []
+
+
+def _kin_output(mech: Any, res: Any) -> dict[str, Any]:
+    out = jsonable(res)
+    if isinstance(out, dict):
+        out["active_names"] = list(mech.active_names)
+        if out.get("pose") is not None and "task_coordinates" not in out:
+            out["task_coordinates"] = _task_coordinates(mech, out["pose"])
+    return out
+
+
+def _q_of(mech: Any, task: Any, ctx: TaskContext) -> Any:
+    """Joint values from ``task.q``, or solved from ``task.qa`` by forward kinematics."""
+    q = getattr(task, "q", None)
+    if q is not None:
+        return _vector(q, mech.joint_names, getattr(mech, "home", None))
+    qa = getattr(task, "qa", None)
+    if qa is not None:
+        res = library_function("forward", "forward")(mech, _vector(qa, mech.active_names))
+        if not res.success:
+            raise ValueError(f"forward kinematics at qa = {list(qa)} failed: {res.message}")
+        ctx.notes.append("configuration solved from qa by forward kinematics")
+        return np.asarray(res.q, dtype=float)
+    return None
+
+
+# ---------------------------------------------------------------------------
+# implemented kinds
+# ---------------------------------------------------------------------------
+
+
+@register("forward")
+def forward_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.forward(mech, qa, guess, **options)``; pictures the configuration."""
+    fn = library_function("forward", "forward")
+    qa = _vector(task.qa, mech.active_names)
+    guess = _vector(task.guess, mech.joint_names, getattr(mech, "home", None))
+    res = fn(mech, qa, guess=guess, **dict(task.options))
+    out = _kin_output(mech, res)
+    if task.draw and res.success:
+        out["pictures"] = _draw(mech, res, ctx)
+    return out
+
+
+@register("inverse")
+def inverse_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.inverse(mech, pose, **options)``: every posture; pictures them all."""
+    fn = library_function("inverse", "inverse")
+    sols = fn(mech, _pose(task.pose), **dict(task.options))
+    out = jsonable(sols)
+    if not isinstance(out, dict):
+        out = {"solutions": out}
+    for s in out.get("solutions", []) or []:
+        if isinstance(s, dict):
+            s["active_names"] = list(mech.active_names)
+    sol_list = list(sols) if isinstance(sols, Sequence) or hasattr(sols, "__iter__") else []
+    out["count"] = out.get("count", len(sol_list))
+    out["success"] = bool(sol_list) and all(bool(getattr(s, "success", True)) for s in sol_list)
+    if task.draw and sol_list:
+        out["pictures"] = _draw(mech, sol_list, ctx)
+    return out
+
+
+# ---------------------------------------------------------------------------
+# kinds dispatched to library functions of later versions
+# ---------------------------------------------------------------------------
+
+
+def _generic(res: Any) -> dict[str, Any]:
+    out = jsonable(res)
+    if not isinstance(out, dict):
+        out = {"value": out}
+    if "count" not in out and hasattr(res, "__len__") and not isinstance(res, Mapping):
+        try:
+            out["count"] = len(res)
+        except TypeError:
+            pass
+    return out
+
+
+def _kw(task: Any, *keys: str) -> dict[str, Any]:
+    return {k: getattr(task, k) for k in keys if getattr(task, k, None) is not None}
+
+
+@register("assembly_modes")
+def assembly_modes_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.assembly_modes(mech, qa, seed=seed, **options)``."""
+    fn = library_function("assembly_modes", "assembly_modes")
+    res = fn(mech, _vector(task.qa, mech.active_names), seed=task.seed, **dict(task.options))
+    out = _generic(res)
+    for s in out.get("solutions", []) or []:
+        if isinstance(s, dict):
+            s["active_names"] = list(mech.active_names)
+    return out
+
+
+@register("track")
+def track_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.track(mech, qa_path, guess, **options)``."""
+    fn = library_function("track", "track")
+    path = [_vector(p, mech.active_names) for p in task.qa_path]
+    guess = _vector(task.guess, mech.joint_names, getattr(mech, "home", None))
+    return _generic(fn(mech, np.asarray(path, dtype=float), guess, **dict(task.options)))
+
+
+@register("jacobians")
+def jacobians_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.jacobians(mech, q, **options)`` at ``q`` (or solved from ``qa``)."""
+    fn = library_function("jacobians", "jacobians")
+    return _generic(fn(mech, _q_of(mech, task, ctx), **dict(task.options)))
+
+
+@register("dof")
+def dof_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.dof(mech[, q], **options)``."""
+    fn = library_function("dof", "dof")
+    q = _q_of(mech, task, ctx)
+    args = () if q is None else (q,)
+    return _generic(fn(mech, *args, **dict(task.options)))
+
+
+@register("classify")
+def classify_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.classify(mech, q, **options)`` at ``q`` (or solved from ``qa``)."""
+    fn = library_function("classify", "classify")
+    return _generic(fn(mech, _q_of(mech, task, ctx), **dict(task.options)))
+
+
+@register("singular_curves")
+def singular_curves_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.singular_curves(mech, grid=..., bounds=..., **options)``."""
+    fn = library_function("singular_curves", "singular_curves")
+    return _generic(fn(mech, **_kw(task, "grid", "bounds"), **dict(task.options)))
+
+
+@register("working_modes")
+def working_modes_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.working_modes(mech[, pose=...], **options)``."""
+    fn = library_function("working_modes", "working_modes")
+    kw = {"pose": _pose(task.pose)} if task.pose is not None else {}
+    return _generic(fn(mech, **kw, **dict(task.options)))
+
+
+@register("aspects")
+def aspects_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.aspects(mech, grid=..., bounds=..., **options)``."""
+    fn = library_function("aspects", "aspects")
+    return _generic(fn(mech, **_kw(task, "grid", "bounds"), **dict(task.options)))
+
+
+@register("statics")
+def statics_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.statics.capability(mech, q, wrench=..., limits=..., **options)``."""
+    fn = library_function("statics.capability", "statics")
+    q = _q_of(mech, task, ctx)
+    return _generic(fn(mech, q, **_kw(task, "wrench", "limits"), **dict(task.options)))
+
+
+def run_task(mech: Any, task: TaskBase, ctx: TaskContext) -> dict[str, Any]:
+    """Run one task through the registry (exceptions propagate to the runner)."""
+    kind = getattr(task, "kind", None)
+    fn = TASKS.get(str(kind))
+    if fn is None:
+        raise NotImplementedError(f"task kind {kind!r} has no runner in this version of optkin")
+    out = fn(mech, task, ctx)
+    if not isinstance(out, dict):
+        out = {"value": jsonable(out)}
+    return out

@@ -1,0 +1,226 @@
+"""Result objects: every solve returns data, never raises on non-convergence.
+
+The vocabulary follows scipy's ``OptimizeResult`` (``x``, ``success``, ``status``,
+``message``, ``nit``) plus the kinematic fields, like cvxpy's ``SolverStats`` for the
+solver side.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["KinResult", "SolutionSet", "SolverStats", "STATUS", "ipopt_status"]
+
+#: The handful of statuses every result uses.
+STATUS = ("optimal", "inaccurate", "infeasible", "iteration_limit", "singular", "error")
+
+_IPOPT_STATUS_MAP = {
+    "Solve_Succeeded": "optimal",
+    "Solved_To_Acceptable_Level": "inaccurate",
+    "Infeasible_Problem_Detected": "infeasible",
+    "Restoration_Failed": "infeasible",
+    "Local_Infeasibility": "infeasible",
+    "Maximum_Iterations_Exceeded": "iteration_limit",
+    "Maximum_CpuTime_Exceeded": "iteration_limit",
+    "Maximum_WallTime_Exceeded": "iteration_limit",
+    "Search_Direction_Becomes_Too_Small": "inaccurate",
+    "Diverging_Iterates": "error",
+    "Error_In_Step_Computation": "error",
+    "Not_Enough_Degrees_Of_Freedom": "error",
+    "Invalid_Number_Detected": "error",
+    "Invalid_Option": "error",
+    "Internal_Error": "error",
+}
+
+
+def ipopt_status(raw: str) -> str:
+    """Map an IPOPT ``return_status`` string to one of :data:`STATUS`."""
+    return _IPOPT_STATUS_MAP.get(raw, "error")
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, (np.floating, np.integer, np.bool_)):
+        return v.item()
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, float) and not np.isfinite(v):
+        return None
+    return v
+
+
+@dataclass
+class SolverStats:
+    """Which solver ran, how long it took and what it said."""
+
+    solver: str = ""
+    setup_time: float = 0.0
+    solve_time: float = 0.0
+    nit: int = 0
+    raw_status: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return _jsonable(
+            {
+                "solver": self.solver,
+                "setup_time": self.setup_time,
+                "solve_time": self.solve_time,
+                "nit": self.nit,
+                "raw_status": self.raw_status,
+                "extra": self.extra,
+            }
+        )
+
+
+@dataclass
+class KinResult:
+    """The outcome of one kinematic solve.
+
+    Attributes
+    ----------
+    q : ndarray
+        All joint values in ``mech.joint_names`` order (NaN where unknown).
+    qa, qp, qc : ndarray
+        Active joints, passive joints of the tree, cut joints ([7.7]). Leg-described
+        platforms have no cut joints (``qc`` is empty); their passive leg joints are ``qp``.
+    x : ndarray
+        The unknowns the solver worked on (passive joints for Khalil mechanisms, platform
+        coordinates for leg-described ones).
+    pose : ndarray
+        4x4 homogeneous transform of the end effector in the base frame.
+    success, status, message :
+        Whether the closure is satisfied to tolerance; one of :data:`STATUS`; a sentence.
+    residual : float
+        max |Phi| at the returned configuration.
+    nit : int
+        Iterations used.
+    posture : tuple or None
+        For inverse solutions: the branch index of each leg; ``working_mode`` the sign of
+        each B_jj (seed 004) where that applies.
+    """
+
+    q: np.ndarray
+    qa: np.ndarray
+    qp: np.ndarray
+    qc: np.ndarray
+    x: np.ndarray
+    pose: np.ndarray
+    success: bool
+    status: str
+    message: str
+    residual: float
+    nit: int = 0
+    stats: SolverStats = field(default_factory=SolverStats)
+    posture: tuple[int, ...] | None = None
+    working_mode: tuple[int, ...] | None = None
+    cond: float = float("nan")
+    joint_names: tuple[str, ...] = ()
+
+    @property
+    def solve_time(self) -> float:
+        return self.stats.solve_time
+
+    @property
+    def maxcv(self) -> float:
+        """Largest constraint violation (scipy's name for :attr:`residual`)."""
+        return self.residual
+
+    def __repr__(self) -> str:
+        flag = "ok" if self.success else "FAILED"
+        extra = f", working_mode={self.working_mode}" if self.working_mode is not None else ""
+        return (
+            f"KinResult({flag}, status={self.status!r}, residual={self.residual:.2e}, "
+            f"nit={self.nit}{extra}, q={np.array2string(self.q, precision=4)})"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict (NaN and inf become None)."""
+        return _jsonable(
+            {
+                "success": bool(self.success),
+                "status": self.status,
+                "message": self.message,
+                "residual": float(self.residual),
+                "nit": int(self.nit),
+                "q": self.q,
+                "qa": self.qa,
+                "qp": self.qp,
+                "qc": self.qc,
+                "x": self.x,
+                "pose": self.pose,
+                "joint_names": list(self.joint_names),
+                "posture": self.posture,
+                "working_mode": self.working_mode,
+                "cond": self.cond,
+                "stats": self.stats.to_dict(),
+            }
+        )
+
+
+class SolutionSet(Sequence):
+    """Several solutions of one problem (assembly modes, postures).
+
+    List-like (``len``, iteration, indexing) with a one-line summary and filters, in the
+    spirit of HomotopyContinuation.jl's ``Result``.
+    """
+
+    def __init__(
+        self,
+        solutions: Sequence[KinResult],
+        kind: str = "solutions",
+        info: dict[str, Any] | None = None,
+        seed: int | None = None,
+    ) -> None:
+        self._sols = list(solutions)
+        self.kind = kind
+        self.info: dict[str, Any] = dict(info or {})
+        self.seed = seed
+
+    def __len__(self) -> int:
+        return len(self._sols)
+
+    def __getitem__(self, i):  # type: ignore[override]
+        if isinstance(i, slice):
+            return SolutionSet(self._sols[i], self.kind, self.info, self.seed)
+        return self._sols[i]
+
+    def __iter__(self) -> Iterator[KinResult]:
+        return iter(self._sols)
+
+    def summary(self) -> str:
+        near = sum(1 for s in self._sols if np.isfinite(s.cond) and s.cond > 1e8)
+        return f"{len(self._sols)} {self.kind}, {near} near-singular"
+
+    def __repr__(self) -> str:
+        return f"SolutionSet({self.summary()})"
+
+    def nonsingular(self, max_cond: float = 1e8) -> SolutionSet:
+        keep = [s for s in self._sols if not (np.isfinite(s.cond) and s.cond > max_cond)]
+        return SolutionSet(keep, self.kind, self.info, self.seed)
+
+    def closest_to(self, q: Sequence[float]) -> KinResult:
+        """The solution whose ``q`` is nearest to ``q`` (angles not wrapped)."""
+        if not self._sols:
+            raise IndexError("the solution set is empty")
+        q = np.asarray(q, dtype=float)
+        d = [float(np.linalg.norm(np.nan_to_num(s.q) - q)) for s in self._sols]
+        return self._sols[int(np.argmin(d))]
+
+    def to_dict(self) -> dict[str, Any]:
+        return _jsonable(
+            {
+                "kind": self.kind,
+                "count": len(self._sols),
+                "seed": self.seed,
+                "info": self.info,
+                "solutions": [s.to_dict() for s in self._sols],
+            }
+        )

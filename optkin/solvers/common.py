@@ -1,0 +1,188 @@
+"""Shared pieces of the solvers: options, input checks, Newton iterations, results."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from ..errors import MechanismError
+from ..model import Model
+from ..results import KinResult, SolverStats
+
+__all__ = ["merge_options", "check_qa", "newton", "make_result", "parse_guess"]
+
+
+def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: str) -> dict[str, Any]:
+    """Merge keyword options over defaults; unknown names warn and are ignored."""
+    out = dict(defaults)
+    for k, v in given.items():
+        if k not in defaults:
+            warnings.warn(
+                f"{where}: unknown option {k!r} ignored; known options: {sorted(defaults)}",
+                stacklevel=3,
+            )
+            continue
+        out[k] = v
+    return out
+
+
+def check_qa(model: Model, qa: Any) -> np.ndarray:
+    mech = model.mech
+    try:
+        a = np.asarray(qa, dtype=float)
+    except (TypeError, ValueError):
+        raise MechanismError(f"qa: expected {mech.dof} numbers, got {qa!r}") from None
+    if a.shape != (mech.dof,):
+        raise MechanismError(
+            f"qa: expected {mech.dof} values for the active joints {list(mech.active_names)}, "
+            f"got shape {a.shape}"
+        )
+    if not np.all(np.isfinite(a)):
+        bad = [mech.active_names[i] for i in np.flatnonzero(~np.isfinite(a))]
+        raise MechanismError(f"qa: non-finite value for {bad}; give finite joint values")
+    if mech.kind == "legs":
+        for i, name in enumerate(mech.active_names):
+            if name.endswith(".rho") and a[i] <= 0:
+                raise MechanismError(
+                    f"qa[{i}] ({name}): a leg length must be positive, got {a[i]:g}"
+                )
+    return a
+
+
+def parse_guess(model: Model, qa: np.ndarray, guess: Any) -> np.ndarray:
+    """The starting unknowns x from a guess: None, a KinResult, x, q, q_p or a pose."""
+    mech = model.mech
+    if guess is None:
+        return model.default_x(qa)
+    if isinstance(guess, KinResult):
+        return np.asarray(guess.x, dtype=float).copy()
+    try:
+        g = np.asarray(guess, dtype=float)
+    except (TypeError, ValueError):
+        raise MechanismError(f"guess: expected numbers, got {guess!r}") from None
+    if not np.all(np.isfinite(g)):
+        raise MechanismError("guess: has non-finite entries")
+    nq = len(mech.joint_names)
+    npas = nq - mech.dof
+    if g.shape == (4, 4):
+        return model.x_from_pose(g)
+    if g.ndim == 1 and g.size == model.nx:
+        return g.copy()
+    if g.ndim == 1 and g.size == nq:
+        return model.x_from_q(g)
+    if g.ndim == 1 and g.size == npas:
+        q = np.empty(nq)
+        act = np.array(mech.actuated)
+        q[act] = qa
+        q[~act] = g
+        return model.x_from_q(q)
+    if g.ndim == 1 and g.size == mech.task_dim and mech.kind == "legs":
+        from ..mechanism.tasks import task_to_pose
+
+        return model.x_from_pose(task_to_pose(mech, g))
+    raise MechanismError(
+        f"guess: expected the unknowns x ({model.nx}: {list(model.x_names)}), all joints ({nq}), "
+        f"the passive joints ({npas}), a 4x4 pose or a KinResult; got shape {g.shape}"
+    )
+
+
+def newton(model: Model, qa: np.ndarray, x: np.ndarray, tol: float, max_iter: int):
+    """Damped Newton iterations (7.9). Returns (x, residual, iterations, converged).
+
+    Once the residual is below ``tol``, up to two more steps polish it to round-off.
+    """
+    step = model.step
+    best_x, best_r = x, np.inf
+    extra = 0
+    for it in range(max_iter):
+        xn, r = step(qa, x)
+        r = float(r)
+        if r < best_r:
+            best_x, best_r = x, r
+        if r <= tol:
+            extra += 1
+            if extra > 2 or r < 1e-14 * max(1.0, model.length):
+                return best_x, best_r, it, True
+        elif extra:
+            return best_x, best_r, it, best_r <= tol
+        xn = np.array(xn).ravel()
+        if not np.all(np.isfinite(xn)) or not np.isfinite(r):
+            return best_x, best_r, it, best_r <= tol
+        x = xn
+    r = float(np.max(np.abs(model.residual(qa, x)))) if model.m else 0.0
+    if r < best_r:
+        best_x, best_r = x, r
+    return best_x, best_r, max_iter, best_r <= tol
+
+
+def make_result(
+    model: Model,
+    qa: np.ndarray,
+    x: np.ndarray,
+    tol: float,
+    nit: int,
+    stats: SolverStats,
+    status: str | None = None,
+    message: str | None = None,
+    posture: tuple[int, ...] | None = None,
+    working_mode: tuple[int, ...] | None = None,
+) -> KinResult:
+    mech = model.mech
+    x = model.canonical_x(x)
+    _, Wp, _ = model.jac(qa, x)
+    phi = model.residual(qa, x)
+    res = float(np.max(np.abs(phi))) if phi.size else 0.0
+    finite = np.all(np.isfinite(x)) and np.isfinite(res)
+    Wp = np.array(Wp)
+    try:
+        cond = float(np.linalg.cond(Wp)) if finite else float("inf")
+    except np.linalg.LinAlgError:
+        cond = float("inf")
+    success = bool(finite and res <= tol)
+    if status is None:
+        status = "optimal" if success else "infeasible"
+    if message is None:
+        if success:
+            message = f"closure satisfied: max |Phi| = {res:.2e}"
+        else:
+            worst = model.row_names[int(np.nanargmax(np.abs(phi)))] if phi.size and finite else "?"
+            message = (
+                f"the loops do not close for these inputs: max |Phi| = {res:.2e} "
+                f"(worst row {worst}); the active joint values may be out of reach"
+            )
+    if finite:
+        q = model.to_q(qa, x)
+        pose = model.pose(qa, x)
+    else:
+        q = np.full(len(mech.joint_names), np.nan)
+        pose = np.full((4, 4), np.nan)
+    act = np.array(mech.actuated)
+    cut = set(mech.cut_names)
+    is_cut = np.array([n in cut for n in mech.joint_names], dtype=bool)
+    stats.nit = nit
+    return KinResult(
+        q=q,
+        qa=np.asarray(qa, dtype=float).copy(),
+        qp=q[~act & ~is_cut],
+        qc=q[is_cut],
+        x=x,
+        pose=pose,
+        success=success,
+        status=status if success or status != "optimal" else "infeasible",
+        message=message,
+        residual=res,
+        nit=nit,
+        stats=stats,
+        posture=posture,
+        working_mode=working_mode,
+        cond=cond,
+        joint_names=tuple(mech.joint_names),
+    )
+
+
+def timer() -> float:
+    return time.perf_counter()
