@@ -264,12 +264,16 @@ def check_expected(expected: Expected | None, output: dict[str, Any] | None,
     if expected.max_count is not None:
         ok = isinstance(count, int) and count <= expected.max_count
         add("max_count", expected.max_count, ok, _fmt(count))
-    for path, spec in expected.values.items():
-        if isinstance(spec, dict):
-            want, tol = spec["value"], spec.get("tol", expected.tol)
-            rtol, wrap = spec.get("rtol", expected.rtol), spec.get("wrap", False)
-        else:
-            want, tol, rtol, wrap = spec, expected.tol, expected.rtol, False
+    items: list[tuple[str, dict[str, Any]]] = [
+        (path, spec if isinstance(spec, dict) else {"value": spec})
+        for path, spec in expected.values.items()
+    ]
+    items += [(c.path, c.model_dump(exclude_none=True)) for c in expected.checks]
+    for path, spec in items:
+        want = spec["value"]
+        tol = spec.get("tol") or expected.tol
+        rtol = spec.get("rtol") if spec.get("rtol") is not None else expected.rtol
+        wrap = bool(spec.get("wrap", False))
         tokens = parse_value_path(path)
         ok, got = _evaluate(out, tokens, 0, None, None,
                             lambda v, w=want, t=tol, r=rtol, a=wrap: _close(v, w, t, r, a))

@@ -306,6 +306,7 @@ class Rpr3Args(Strict):
 
     base: Points(3, 2)
     platform: Points(3, 2)
+    home: Numbers(3) | None = None
 
 
 class Rrr3Args(Strict):
@@ -315,6 +316,7 @@ class Rrr3Args(Strict):
     platform: Points(3, 2)
     proximal: Annotated[Any, PlainValidator(_number_or_numbers(3, True))]
     distal: Annotated[Any, PlainValidator(_number_or_numbers(3, True))]
+    home: Numbers(3) | None = None
 
 
 class FiveBarArgs(Strict):
@@ -328,7 +330,7 @@ class FiveBarArgs(Strict):
 
 
 class FourBarArgs(Strict):
-    """Planar four-bar: ground L1, crank L2, coupler L3, rocker L4."""
+    """Planar four-bar (Modern Robotics 7.3): crank L1, coupler L2, rocker L3, ground L4."""
 
     L1: PositiveNumber
     L2: PositiveNumber
@@ -337,29 +339,30 @@ class FourBarArgs(Strict):
 
 
 class StewartGoughArgs(Strict):
-    """6-SPS/UPS Stewart-Gough platform: 6 base points and 6 platform points in 3D."""
+    """6-UPS Stewart-Gough platform: 6 base points and 6 platform points in 3D."""
 
     base: Points(6, 3)
     platform: Points(6, 3)
+    home: Numbers(6) | None = None
 
 
 class DeltaArgs(Strict):
     """Delta robot: base radius, platform radius, upper (arm) and lower (forearm) lengths."""
 
-    R_base: PositiveNumber | None = None
-    r_platform: PositiveNumber | None = None
+    base_radius: PositiveNumber | None = None
+    platform_radius: PositiveNumber | None = None
     upper: PositiveNumber | None = None
     lower: PositiveNumber | None = None
 
 
 class Sr400Args(Strict):
-    """Acma SR400, Table 7.1 of Khalil's chapter 7."""
+    """Acma SR400, Table 7.1 of Khalil's chapter 7 (d9 = d3, d10 = -d8)."""
 
-    d2: NonNegNumber | None = None
+    d2: Number | None = None
     d3: PositiveNumber | None = None
-    d4: NonNegNumber | None = None
+    d4: Number | None = None
     d8: PositiveNumber | None = None
-    rl4: NonNegNumber | None = None
+    rl4: Number | None = None
 
 
 class Akr3000Args(Strict):
@@ -368,11 +371,11 @@ class Akr3000Args(Strict):
     d3: PositiveNumber | None = None
     d4: PositiveNumber | None = None
     d7: PositiveNumber | None = None
+    r8: Number | None = None
     d13: PositiveNumber | None = None
     d14: PositiveNumber | None = None
     gamma13: Number | None = None
     gamma14: Number | None = None
-    r8: NonNegNumber | None = None
 
 
 #: Argument models of the library mechanisms (name -> model). A library mechanism
@@ -531,11 +534,31 @@ def _expected_value(v: Any) -> Any:
     raise _err("expected_value", "expected a number, list, boolean, string or table", v)
 
 
+def _path(v: Any) -> str:
+    s = _string(v)
+    try:
+        parse_value_path(s)
+    except ValueError as e:
+        raise PydanticCustomError("value_path", str(e)) from None
+    return s
+
+
+class Check(Strict):
+    """One value check: ``{ path = "solutions[any].qa", value = [..], tol = 1e-6 }``."""
+
+    path: Annotated[str, PlainValidator(_path)]
+    value: Annotated[Any, PlainValidator(_expected_value)]
+    tol: PositiveNumber | None = None
+    rtol: NonNegNumber | None = None
+    wrap: Bool = False
+
+
 class Expected(Strict):
     """What a task must produce; checked by the runner (pass/fail per task).
 
     ``values`` maps result paths (``"q[theta3]"``, ``"pose[0][3]"``,
-    ``"solutions[any].qa"``, ``"solutions[*].success"``) to expected values.
+    ``"solutions[any].qa"``, ``"solutions[*].success"``) to expected values;
+    ``checks`` lists the same as tables (use it to check one path several times).
     """
 
     success: Bool | None = None
@@ -544,6 +567,7 @@ class Expected(Strict):
     min_count: NonNegInt | None = None
     max_count: NonNegInt | None = None
     values: dict[str, Annotated[Any, PlainValidator(_expected_value)]] = Field(default_factory=dict)
+    checks: list[Check] = Field(default_factory=list)
     tol: PositiveNumber = 1e-6
     rtol: NonNegNumber = 0.0
     source: Str | None = None

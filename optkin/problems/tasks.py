@@ -203,6 +203,8 @@ def inverse_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     for s in out.get("solutions", []) or []:
         if isinstance(s, dict):
             s["active_names"] = list(mech.active_names)
+            if s.get("pose") is not None:
+                s["task_coordinates"] = _task_coordinates(mech, s["pose"])
     sol_list = list(sols) if isinstance(sols, Sequence) or hasattr(sols, "__iter__") else []
     out["count"] = out.get("count", len(sol_list))
     out["success"] = bool(sol_list) and all(bool(getattr(s, "success", True)) for s in sol_list)
@@ -241,6 +243,8 @@ def assembly_modes_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any
     for s in out.get("solutions", []) or []:
         if isinstance(s, dict):
             s["active_names"] = list(mech.active_names)
+            if s.get("pose") is not None:
+                s["task_coordinates"] = _task_coordinates(mech, s["pose"])
     return out
 
 

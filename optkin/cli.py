@@ -1,0 +1,232 @@
+"""The ``optkin`` command: ``run``, ``validate`` and ``show`` problem files.
+
+Exit status: 0 everything passed; 1 some task failed or missed its ``[expected]``;
+2 invalid input (a malformed problem file, a missing path, bad options). User errors
+print a one-line message per problem, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from optkin.errors import OptkinError, ProblemFileError
+
+__all__ = ["main", "build_parser"]
+
+EXIT_OK, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # exit 2 with usage, as argparse does
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_INVALID, f"{self.prog}: error: {message}\n")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``optkin`` (subcommands run, validate, show)."""
+    from optkin.problems.schema import optkin_version
+
+    p = _Parser(prog="optkin", description="Kinematics of closed-chain and parallel robots: "
+                "run problem files (TOML) and collect results.")
+    p.add_argument("--version", action="version", version=f"optkin {optkin_version()}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    r = sub.add_parser("run", help="run every problem file under the paths")
+    r.add_argument("paths", nargs="+", metavar="PATH", help="problem files or directories")
+    r.add_argument("--out", default="results", metavar="DIR",
+                   help="where results go (default: results/)")
+    r.add_argument("--jobs", "-j", type=_positive_int, default=1, metavar="N",
+                   help="problems run in N parallel processes (default 1)")
+    r.add_argument("--force", action="store_true",
+                   help="rerun problems whose results are complete and unchanged")
+    r.add_argument("--scheduler", metavar="ADDRESS",
+                   help="send problems to a Dask distributed scheduler (e.g. tcp://host:8786)")
+    r.add_argument("--no-pictures", action="store_true", help="do not draw PNG pictures")
+    r.add_argument("--quiet", "-q", action="store_true", help="print only failures")
+
+    v = sub.add_parser("validate", help="check problem files without solving")
+    v.add_argument("paths", nargs="+", metavar="PATH", help="problem files or directories")
+
+    s = sub.add_parser("show", help="draw a problem's mechanism at its first solved configuration")
+    s.add_argument("file", metavar="FILE", help="a problem file")
+    s.add_argument("--out", "-o", metavar="PNG", default=None,
+                   help="picture path (default: FILE with .png)")
+    return p
+
+
+def _err(msg: str) -> None:
+    print(msg, file=sys.stderr)
+
+
+def _progress_factory(enabled: bool):
+    if not enabled:
+        return None
+
+    def make(total: int) -> Any:
+        from tqdm import tqdm
+
+        return tqdm(total=total, unit="problem", desc="optkin", file=sys.stderr,
+                    dynamic_ncols=True, leave=False)
+
+    return make
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from optkin.problems.runner import run_paths
+
+    tty = sys.stdout.isatty()
+    t0 = time.perf_counter()
+    report = run_paths(
+        args.paths,
+        out=args.out,
+        jobs=args.jobs,
+        force=args.force,
+        scheduler=args.scheduler,
+        pictures=not args.no_pictures,
+        progress=_progress_factory(tty and not args.quiet),
+    )
+    for msg in report.invalid.values():
+        _err(msg)
+    for name, msg in report.crashed.items():
+        print(f"{name}: ERROR: {msg}")
+    n_tasks = n_pass = 0
+    for name, t in report.tasks:
+        n_tasks += 1
+        if t.get("passed"):
+            n_pass += 1
+            continue
+        label = f"task[{t.get('index')}] ({t.get('kind')}{', ' + t['name'] if t.get('name') else ''})"
+        state = "MISSED EXPECTED" if t.get("status") == "ok" else str(t.get("status", "")).upper()
+        print(f"{name}: {label}: {state}: {t.get('message', '')}")
+    elapsed = time.perf_counter() - t0
+    if not args.quiet or report.exit_code:
+        parts = [f"{len(report.ran)} run", f"{len(report.skipped)} skipped (unchanged)"]
+        if report.invalid:
+            parts.append(f"{len(report.invalid)} invalid")
+        if report.crashed:
+            parts.append(f"{len(report.crashed)} crashed")
+        print(f"optkin: {len(report.ran) + len(report.skipped) + len(report.invalid) + len(report.crashed)}"
+              f" problem(s): {', '.join(parts)}; {n_pass}/{n_tasks} task(s) passed; "
+              f"{elapsed:.1f} s; results in {args.out}/")
+    return report.exit_code
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from optkin.problems.runner import find_problem_files
+    from optkin.problems.schema import load_problem
+
+    infos = find_problem_files(args.paths)
+    if not infos:
+        _err(f"optkin: no problem files (*.toml) under {' '.join(args.paths)}")
+        return EXIT_INVALID
+    bad = 0
+    for info in infos:
+        try:
+            problem = load_problem(info.path, display=info.display, check=True)
+        except ProblemFileError as e:
+            bad += 1
+            _err(str(e))
+            continue
+        print(f"{info.display}: ok ({len(problem.spec.task)} task(s), mechanism "
+              f"{getattr(problem.mechanism, 'name', '?')})")
+    return EXIT_INVALID if bad else EXIT_OK
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from optkin.problems.schema import load_problem
+    from optkin.problems.tasks import library_function
+
+    path = Path(args.file)
+    problem = load_problem(path, display=path.name, check=True)
+    mech = problem.mechanism
+    try:
+        draw = library_function("plot.draw", "show")
+    except NotImplementedError:
+        _err(f"{path.name}: drawing is not available in this version of optkin (no optkin.plot.draw)")
+        return EXIT_FAILED
+    what = None
+    for task in problem.spec.task:
+        if task.kind not in ("forward", "inverse"):  # type: ignore[attr-defined]
+            continue
+        if task.kind == "forward":  # type: ignore[attr-defined]
+            res = library_function("forward", "forward")(
+                mech, _as_list(task.qa, mech.active_names), **dict(task.options))  # type: ignore[attr-defined]
+            if res.success:
+                what = res
+                break
+        else:
+            sols = library_function("inverse", "inverse")(
+                mech, np.asarray(task.pose, dtype=float), **dict(task.options))  # type: ignore[attr-defined]
+            if len(sols):
+                what = sols[0]
+                break
+    if what is None:
+        home = getattr(mech, "home", None)
+        try:
+            res = library_function("forward", "forward")(mech, np.zeros(len(mech.active_names)),
+                                                         guess=home)
+        except Exception:  # noqa: BLE001
+            res = None
+        if res is None or not res.success:
+            _err(f"{path.name}: no task gave a configuration to draw; add a forward or inverse task")
+            return EXIT_FAILED
+        what = res
+    out = Path(args.out) if args.out else path.with_suffix(".png")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    draw(mech, what, str(out))
+    print(f"{path.name}: wrote {out}")
+    return EXIT_OK
+
+
+def _as_list(v: Any, names: Sequence[str]) -> list[float]:
+    if isinstance(v, dict):
+        return [float(v[n]) for n in names]
+    return [float(x) for x in v]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``optkin`` console script; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(list(argv) if argv is not None else None)
+    try:
+        if args.command == "run":
+            return _cmd_run(args)
+        if args.command == "validate":
+            return _cmd_validate(args)
+        if args.command == "show":
+            return _cmd_show(args)
+    except ProblemFileError as e:
+        _err(str(e))
+        return EXIT_INVALID
+    except OptkinError as e:
+        _err(f"optkin: {e}")
+        return EXIT_INVALID
+    except KeyboardInterrupt:
+        _err("optkin: interrupted; completed results are kept, rerun to resume")
+        return 130
+    except BrokenPipeError:
+        return EXIT_FAILED
+    parser.error(f"unknown command {args.command!r}")
+    return EXIT_INVALID
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
