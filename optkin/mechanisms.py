@@ -15,7 +15,7 @@ from .errors import MechanismError
 from .mechanism import Mechanism
 
 __all__ = [
-    "rpr3", "rrr3", "five_bar", "four_bar", "stewart_gough", "delta", "sr400", "akr3000",
+    "rpr3", "rpr4", "rrr3", "five_bar", "four_bar", "stewart_gough", "delta", "sr400", "akr3000",
     "LIBRARY",
 ]
 
@@ -79,6 +79,23 @@ def rpr3(base: Any, platform: Any, home: Sequence[float] | None = None) -> Mecha
     p = _points(platform, (3, 2), "platform")
     legs = [{"type": "RPR", "base": b[i], "platform": p[i]} for i in range(3)]
     return Mechanism.from_legs(legs, "planar", name="3-RPR", home=home)
+
+
+def rpr4(base: Any, platform: Any, home: Sequence[float] | None = None) -> Mechanism:
+    """Planar 4-RPR: a redundantly actuated platform (four actuated legs, three dof).
+
+    base (4, 2) joint centres, platform (4, 2) in the platform frame; q_a = the four leg
+    lengths (they must be consistent for the platform to close: the direct model solves
+    the four closure rows in the least-squares sense). ``mech.redundant`` is True.
+
+    >>> m = rpr4([[0, 0], [1, 0], [1, 1], [0, 1]], [[-0.1, -0.1], [0.1, -0.1], [0.1, 0.1], [-0.1, 0.1]])
+    >>> m.dof, m.n_actuated, m.redundant
+    (3, 4, True)
+    """
+    b = _points(base, (4, 2), "base")
+    p = _points(platform, (4, 2), "platform")
+    legs = [{"type": "RPR", "base": b[i], "platform": p[i]} for i in range(4)]
+    return Mechanism.from_legs(legs, "planar", name="4-RPR", home=home, redundant=True)
 
 
 def rrr3(
@@ -251,6 +268,7 @@ def akr3000(
 #: name -> factory, for problem files and the command line.
 LIBRARY: dict[str, Callable[..., Mechanism]] = {
     "rpr3": rpr3,
+    "rpr4": rpr4,
     "rrr3": rrr3,
     "five_bar": five_bar,
     "four_bar": four_bar,

@@ -45,12 +45,17 @@ class Mechanism:
     actuated : tuple of bool
         Whether each joint is actuated.
     dof : int
-        The number of degrees of freedom the mechanism is meant to have (= active joints).
+        The number of degrees of freedom the mechanism is meant to have (= active joints,
+        unless the mechanism is redundantly actuated).
+    redundant : bool
+        True for a redundantly actuated platform: more actuated joints (``n_actuated``) than
+        degrees of freedom; the closure then has more rows than unknowns.
     """
 
     __slots__ = (
         "name", "kind", "joint_names", "actuated", "revolute", "dof", "planar", "table",
-        "end_effector", "task", "legs", "platform", "home", "params", "_spec", "_key",
+        "end_effector", "task", "legs", "platform", "home", "params", "redundant", "_spec",
+        "_key",
         "__weakref__",
     )
 
@@ -135,6 +140,7 @@ class Mechanism:
             )
         m.task = task
         m.planar = False
+        m.redundant = False
         m.legs = ()
         m.platform = None
         m.params = dict(table.params)
@@ -161,6 +167,7 @@ class Mechanism:
         name: str = "legs",
         home: Sequence[float] | None = None,
         params: Mapping[str, Any] | None = None,
+        redundant: bool = False,
     ) -> Mechanism:
         """A parallel platform from its legs (see :mod:`optkin.mechanism.legs`).
 
@@ -174,8 +181,12 @@ class Mechanism:
             (x, y, z, roll, pitch, yaw) or ``spatial_translational`` (x, y, z).
         home : sequence
             A pose (task coordinates) used as the default guess of :func:`optkin.forward`.
+        redundant : bool
+            Allow more actuated legs than degrees of freedom (redundant actuation). The
+            direct model then solves the overdetermined closure in the least-squares sense
+            (Gauss-Newton), and the leg lengths must be consistent for it to close.
         """
-        legs_t = validate_legs(legs, platform)
+        legs_t = validate_legs(legs, platform, redundant=bool(redundant))
         m = object.__new__(cls)
         m.kind = "legs"
         m.name = str(name)
@@ -193,6 +204,7 @@ class Mechanism:
         m.revolute = tuple(rev)
         m.dof = dof
         m.planar = dim == 2
+        m.redundant = bool(redundant)
         m.table = None
         m.end_effector = None
         m.task = coords
@@ -213,6 +225,8 @@ class Mechanism:
             "legs": [leg.to_dict() for leg in legs_t],
             "home": None if m.home is None else m.home.tolist(),
         }
+        if m.redundant:  # only then, so that existing keys do not change
+            m._spec["redundant"] = True
         m._finish()
         return m
 
@@ -243,6 +257,11 @@ class Mechanism:
     @property
     def active_names(self) -> tuple[str, ...]:
         return tuple(n for n, a in zip(self.joint_names, self.actuated) if a)
+
+    @property
+    def n_actuated(self) -> int:
+        """The number of actuated joints (= dof unless :attr:`redundant`)."""
+        return int(sum(self.actuated))
 
     @property
     def active_index(self) -> np.ndarray:
@@ -288,12 +307,13 @@ class Mechanism:
                 (spec["rows"], spec["loops"], spec["params"], spec["end_effector"], spec["name"],
                  spec["task"], None if self.home is None else self.home.tolist(), self.dof),
             )
-        return (_rebuild_legs, (spec["legs"], spec["platform"], spec["name"], spec["home"]))
+        return (_rebuild_legs, (spec["legs"], spec["platform"], spec["name"], spec["home"],
+                                spec.get("redundant", False)))
 
 
 def _rebuild_khalil(rows, loops, params, ee, name, task, home, dof):
     return Mechanism.from_khalil(rows, loops, params, ee, name, task, home, dof)
 
 
-def _rebuild_legs(legs, platform, name, home):
-    return Mechanism.from_legs(legs, platform, name, home)
+def _rebuild_legs(legs, platform, name, home, redundant=False):
+    return Mechanism.from_legs(legs, platform, name, home, redundant=redundant)

@@ -309,7 +309,9 @@ def leg_forward(leg: Leg, q: np.ndarray, planar_point: bool = False) -> tuple[np
     raise MechanismError(f"unknown leg type {t!r}")  # pragma: no cover
 
 
-def validate_legs(legs: Sequence[Any], platform: str) -> tuple[Leg, ...]:
+def validate_legs(legs: Sequence[Any], platform: str, redundant: bool = False) -> tuple[Leg, ...]:
+    """Validate the legs of a platform: one actuated leg per degree of freedom, or (with
+    ``redundant=True``) more actuated legs than degrees of freedom (redundant actuation)."""
     if platform not in PLATFORMS:
         raise MechanismError(
             f"platform: unknown platform kind {platform!r}; use one of {sorted(PLATFORMS)}"
@@ -324,10 +326,17 @@ def validate_legs(legs: Sequence[Any], platform: str) -> tuple[Leg, ...]:
                 f"legs[{i}].type: a {leg.type} leg is {'planar' if leg.dim == 2 else 'spatial'} "
                 f"but the platform is {platform!r}"
             )
-    if len(out) != dof:
+    if redundant:
+        if len(out) <= dof:
+            raise MechanismError(
+                f"legs: a redundantly actuated {platform!r} platform needs more than {dof} "
+                f"actuated legs, got {len(out)}; drop redundant=True for {dof} legs"
+            )
+    elif len(out) != dof:
+        hint = "; pass redundant=True for redundant actuation" if len(out) > dof else ""
         raise MechanismError(
             f"legs: a {platform!r} platform has {dof} degrees of freedom and needs {dof} "
-            f"actuated legs, got {len(out)}"
+            f"actuated legs, got {len(out)}{hint}"
         )
     return out
 

@@ -70,7 +70,7 @@ class Model:
         t0 = time.perf_counter()
         self.mech = mech
         self.length = _length_scale(mech)
-        na = mech.dof
+        na = mech.n_actuated  # = dof unless the mechanism is redundantly actuated
         self.na = na
         qa = ca.SX.sym("qa", na)
         self._nlp: Any = None
@@ -263,13 +263,21 @@ class Model:
         return f
 
     def nlp(self) -> Any:
-        """The IPOPT solver of the direct model: min |(x - x_guess)/scale|^2 s.t. Phi = 0."""
+        """The IPOPT solver of the direct model: min |(x - x_guess)/scale|^2 s.t. Phi = 0
+        (redundantly actuated platforms: min |Phi|^2, unconstrained)."""
         if self._nlp is None:
             x = self.x_sym
             p = ca.SX.sym("p", self.na + self.nx)
             qa, xg = p[: self.na], p[self.na:]
             phi = ca.substitute(self.phi_sym, self.qa_sym, qa)
             f = ca.sumsqr((x - xg) / self.x_scale)
+            g = phi
+            if self.m > self.nx:
+                # redundant actuation: more closure rows than unknowns; IPOPT refuses an
+                # overdetermined equality system, so minimise |Phi|^2 (a tiny pull towards the
+                # guess keeps the Hessian regular) and let the Newton polish decide success
+                f = ca.sumsqr(phi) + 1e-10 * f
+                g = ca.SX(0, 1)
             opts = {
                 "ipopt.print_level": 0,
                 "ipopt.sb": "yes",
@@ -280,7 +288,7 @@ class Model:
                 "error_on_fail": False,
             }
             t0 = time.perf_counter()
-            self._nlp = ca.nlpsol("forward", "ipopt", {"x": x, "p": p, "f": f, "g": phi}, opts)
+            self._nlp = ca.nlpsol("forward", "ipopt", {"x": x, "p": p, "f": f, "g": g}, opts)
             self.nlp_build_time = time.perf_counter() - t0
         return self._nlp
 

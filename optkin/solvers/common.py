@@ -32,13 +32,14 @@ def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: 
 
 def check_qa(model: Model, qa: Any) -> np.ndarray:
     mech = model.mech
+    na = mech.n_actuated
     try:
         a = np.asarray(qa, dtype=float)
     except (TypeError, ValueError):
-        raise MechanismError(f"qa: expected {mech.dof} numbers, got {qa!r}") from None
-    if a.shape != (mech.dof,):
+        raise MechanismError(f"qa: expected {na} numbers, got {qa!r}") from None
+    if a.shape != (na,):
         raise MechanismError(
-            f"qa: expected {mech.dof} values for the active joints {list(mech.active_names)}, "
+            f"qa: expected {na} values for the active joints {list(mech.active_names)}, "
             f"got shape {a.shape}"
         )
     if not np.all(np.isfinite(a)):
@@ -67,7 +68,7 @@ def parse_guess(model: Model, qa: np.ndarray, guess: Any) -> np.ndarray:
     if not np.all(np.isfinite(g)):
         raise MechanismError("guess: has non-finite entries")
     nq = len(mech.joint_names)
-    npas = nq - mech.dof
+    npas = nq - mech.n_actuated
     if g.shape == (4, 4):
         return model.x_from_pose(g)
     if g.ndim == 1 and g.size == model.nx:
