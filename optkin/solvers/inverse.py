@@ -21,8 +21,8 @@ from ..mechanism.geometry import wrap_angle
 from ..mechanism.legs import leg_inverse
 from ..mechanism.tasks import as_pose
 from ..model import Model, get_model
-from ..model.core import damped_step
 from ..model import khalil as kh
+from ..model.core import damped_step
 from ..results import KinResult, SolutionSet, SolverStats
 from .common import make_result, merge_options, newton, timer
 

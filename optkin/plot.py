@@ -1,0 +1,119 @@
+"""Pictures of mechanisms in their configurations (PNG files through matplotlib's Agg)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from .mechanism import Mechanism
+from .results import KinResult
+
+__all__ = ["draw", "chain_points"]
+
+
+def _mpl():
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def chain_points(mech: Mechanism, r: KinResult) -> list[np.ndarray]:
+    """Polylines (arrays (k, 3)) of the mechanism's links at the configuration of ``r``."""
+    lines: list[np.ndarray] = []
+    if mech.kind == "khalil":
+        qmap = dict(zip(mech.joint_names, r.q))
+        table = mech.table
+        origin = {0: np.zeros(3)}
+        for f in table.frames:
+            origin[f.j] = table.transform_0(f.j, qmap)[:3, 3]
+        for f in table.frames:
+            lines.append(np.array([origin[f.a], origin[f.j]]))
+        return lines
+    T = r.pose
+    R, p = T[:3, :3], T[:3, 3]
+    plat = []
+    k = 0
+    for leg in mech.legs:
+        n = len(leg.joint_names)
+        q = r.q[k:k + n]
+        k += n
+        A = np.pad(leg.base, (0, 3 - leg.base.size))
+        P = p + R @ np.pad(leg.platform, (0, 3 - leg.platform.size))
+        pts = [A]
+        if leg.type == "RRR":
+            l1 = leg.lengths[0]
+            pts.append(A + l1 * np.array([np.cos(q[0]), np.sin(q[0]), 0.0]))
+        elif leg.type in ("RUS", "RSS"):
+            la = leg.lengths[0]
+            w = np.cross(leg.axis, leg.arm)
+            pts.append(A + la * (np.cos(q[0]) * leg.arm + np.sin(q[0]) * w))
+        pts.append(P)
+        lines.append(np.array(pts))
+        plat.append(P)
+    if len(plat) > 2:
+        lines.append(np.array(plat + [plat[0]]))
+    return lines
+
+
+def draw(
+    mech: Mechanism,
+    results: KinResult | Sequence[KinResult],
+    path: str | os.PathLike[str],
+    title: str | None = None,
+) -> str:
+    """Draw ``mech`` in one or several configurations (one panel each) to a PNG file.
+
+    Returns the path written.
+    """
+    plt = _mpl()
+    rs = [results] if isinstance(results, KinResult) else list(results)
+    rs = [r for r in rs if np.all(np.isfinite(r.q))]
+    n = max(1, len(rs))
+    cols = min(4, n)
+    rows = (n + cols - 1) // cols
+    spatial = not (mech.planar or (mech.kind == "khalil" and _is_planar_khalil(mech, rs)))
+    fig = plt.figure(figsize=(3.6 * cols, 3.4 * rows))
+    for i in range(n):
+        if spatial:
+            ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
+        else:
+            ax = fig.add_subplot(rows, cols, i + 1)
+        if i >= len(rs):
+            ax.set_title("no solution")
+            continue
+        r = rs[i]
+        for j, line in enumerate(chain_points(mech, r)):
+            style: dict[str, Any] = {"lw": 2, "marker": "o", "ms": 4}
+            color = "C0" if mech.kind == "legs" and j < len(mech.legs) else "C1"
+            if spatial:
+                ax.plot(line[:, 0], line[:, 1], line[:, 2], color=color, **style)
+            else:
+                ax.plot(line[:, 0], line[:, 1], color=color, **style)
+        if not spatial:
+            ax.set_aspect("equal", adjustable="datalim")
+            ax.grid(alpha=0.3)
+        label = f"#{i + 1}"
+        if r.working_mode is not None:
+            label += " wm " + "".join("+" if s > 0 else "-" for s in r.working_mode)
+        if not r.success:
+            label += " (failed)"
+        ax.set_title(label, fontsize=9)
+    fig.suptitle(title or f"{mech.name}: {len(rs)} configuration(s)")
+    fig.tight_layout()
+    path = os.fspath(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def _is_planar_khalil(mech: Mechanism, rs: Sequence[KinResult]) -> bool:
+    if not rs:
+        return False
+    pts = np.vstack(chain_points(mech, rs[0]))
+    return bool(np.ptp(pts[:, 2]) < 1e-9)
