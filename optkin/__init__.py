@@ -5,7 +5,7 @@ optkin compiles it once into CasADi Functions and solves its direct and inverse 
 models, returning result objects that say what happened.
 """
 
-from . import mechanisms
+from . import mechanisms, plot
 from .errors import MechanismError, OptkinError, ProblemFileError, SolverError
 from .mechanism import Leg, Mechanism
 from .model import get_model
@@ -29,4 +29,5 @@ __all__ = [
     "get_model",
     "inverse",
     "mechanisms",
+    "plot",
 ]
