@@ -150,7 +150,6 @@ def test_sr400_inverse_contains_start_and_roundtrips():
     assert len(sols) == 16
 
 
-@pytest.mark.slow
 def test_akr3000_inverse_roundtrip():
     m = M.akr3000()
     ref = {"theta2": 1.0, "theta3": 0.9, "theta4": 1.1, "theta7": -1.0}
