@@ -6,6 +6,7 @@ models, returning result objects that say what happened.
 """
 
 from . import mechanisms, plot
+from .analysis import Jacobians, jacobians
 from .errors import MechanismError, OptkinError, ProblemFileError, SolverError
 from .mechanism import Leg, Mechanism
 from .model import get_model
@@ -15,6 +16,7 @@ from .solvers import forward, inverse
 __version__ = "0.1.0"
 
 __all__ = [
+    "Jacobians",
     "KinResult",
     "Leg",
     "Mechanism",
@@ -28,6 +30,7 @@ __all__ = [
     "forward",
     "get_model",
     "inverse",
+    "jacobians",
     "mechanisms",
     "plot",
 ]

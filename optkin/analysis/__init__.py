@@ -1,0 +1,7 @@
+"""Analyses of a compiled mechanism: velocity and acceleration models, degrees of freedom,
+singularity classification and maps (seed 000 7.8-7.11, Modern Robotics 7.2-7.3, seeds 003
+and 004)."""
+
+from .velocity import Jacobians, jacobians
+
+__all__ = ["Jacobians", "jacobians"]

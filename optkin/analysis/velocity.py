@@ -1,0 +1,399 @@
+"""Velocity and acceleration models of closed chains: :func:`jacobians`.
+
+Khalil mechanisms (seed 000, 7.8): the kinematic constraint equation [7.49]
+
+    [W_a  W_p  0  ] [qdot_a]
+    [W_ac W_pc W_c] [qdot_p] = 0,      qdot_p = -W_p^-1 W_a qdot_a = W qdot_a   [7.51]
+                    [qdot_c]
+
+obtained by automatic differentiation of the model's independent closure rows (position of
+R_{k+B} in R_k and the Gibbs vector of their relative rotation, [7.8]). At a closed
+configuration the position and the x/y rotation rows of a loop do not depend on the
+velocity of a revolute cut joint (its frame origin and z axis do not move with it), so
+the rows split into the two block rows of [7.49] exactly as in Example 7.8 (ii).
+
+Leg-described platforms (seed 004): the model rows f_i(q_a, x) = |P_i(x) - C_i(q_a,i)| - l_i
+give Chablat and Wenger's A t + B qdot_a = 0 with A = (df/dx) E(x) (E maps the platform
+twist t to coordinate rates x_dot) and B = df/dq_a diagonal; H_a, H_p of Modern Robotics
+(7.13) come from a joint-level closure (each leg chain reaches the platform), with the
+platform coordinates as extra passive coordinates.
+
+The end-effector twist is t = (v, omega): the velocity of the end-effector frame origin and
+the angular velocity, both in base coordinates (Khalil's [7.44] ordering). For planar
+platforms t = (vx, vy, omega_z), for point platforms (vx, vy), for translational ones
+(vx, vy, vz). ``J_s`` is Modern Robotics' spatial twist (omega_s, v_s) Jacobian.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import MechanismError
+from ..mechanism import Mechanism
+from ..model import get_model
+from ..results import KinResult
+from ._functions import analysis_functions
+
+__all__ = ["Jacobians", "jacobians", "config_of", "twist_rows", "TWIST_NAMES"]
+
+TWIST_NAMES = ("vx", "vy", "vz", "wx", "wy", "wz")
+_TASK_TO_TWIST = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
+
+
+def twist_rows(mech: Mechanism) -> list[int]:
+    """Which of (vx, vy, vz, wx, wy, wz) the end-effector twist of ``mech`` keeps."""
+    if mech.kind == "khalil":
+        return list(range(6))
+    return {"planar": [0, 1, 5], "planar_point": [0, 1], "spatial": list(range(6)),
+            "spatial_translational": [0, 1, 2]}[mech.platform]
+
+
+def config_of(mech: Mechanism, q: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(q, q_a, x) from a full joint vector or a :class:`KinResult`."""
+    model = get_model(mech)
+    nq = len(mech.joint_names)
+    act = np.array(mech.actuated)
+    if isinstance(q, KinResult):
+        qv = np.asarray(q.q, dtype=float)
+        x = np.asarray(q.x, dtype=float)
+        if qv.shape != (nq,) or not np.all(np.isfinite(qv)):
+            raise MechanismError(
+                "q: the KinResult has no complete joint vector (failed solve?); pass a "
+                "successful result or all joint values"
+            )
+        return qv, qv[act], x
+    try:
+        qv = np.asarray(q, dtype=float)
+    except (TypeError, ValueError):
+        raise MechanismError(f"q: expected {nq} joint values or a KinResult, got {q!r}") from None
+    if qv.shape != (nq,):
+        raise MechanismError(
+            f"q: expected all {nq} joint values {list(mech.joint_names)} (as in KinResult.q), "
+            f"got shape {qv.shape}"
+        )
+    if not np.all(np.isfinite(qv)):
+        raise MechanismError("q: has non-finite entries; give a closed configuration")
+    return qv, qv[act], model.x_from_q(qv)
+
+
+def _solve(M: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """M^-1 R for square regular M, else the least-squares / minimum-norm solution."""
+    if M.shape[0] == M.shape[1]:
+        try:
+            if np.linalg.cond(M) < 1e14:
+                return np.linalg.solve(M, R)
+        except np.linalg.LinAlgError:
+            pass
+    return np.linalg.lstsq(M, R, rcond=None)[0]
+
+
+def _quat_rate_matrix(qq: np.ndarray) -> np.ndarray:
+    """G (4x3) with qdot = 0.5 G omega for omega in base coordinates (q = (w, x, y, z))."""
+    w, a, b, c = qq
+    return np.array([[-a, -b, -c], [w, c, -b], [-c, w, a], [b, -a, w]])
+
+
+@dataclass
+class Jacobians:
+    """Velocity model of a closed chain at one configuration (see :func:`jacobians`).
+
+    Attributes
+    ----------
+    W_a, W_p, W_ac, W_pc, W_c : ndarray
+        The blocks of [7.49] (Khalil mechanisms, columns q_a / q_p / q_c in joint order).
+        For leg-described platforms W_a, W_p are the model's dPhi/dq_a and dPhi/dx over the
+        platform coordinates x, and W_ac, W_pc, W_c are empty.
+    W : ndarray
+        -W_p^-1 W_a [7.51]: qdot_p (Khalil) or x_dot (platforms) per unit qdot_a.
+    W_x : ndarray
+        Rates of all the model's unknowns x (passive and cut joints; platform coordinates).
+    H, H_a, H_p : ndarray
+        Modern Robotics (7.13): the constraint Jacobian over all joints, split into the
+        actuated and passive columns (passive = every non-actuated joint, in joint order;
+        platforms: passive leg joints, then the platform coordinates).
+    J_a : ndarray
+        End-effector twist per unit qdot_a (MR (7.21)), rows ``twist_names``.
+    J_s : ndarray
+        The same as a spatial twist (omega_s, v_s) of Modern Robotics (6 rows).
+    A, B : ndarray or None
+        Chablat and Wenger: A t + B qdot_a = 0 (leg-described platforms; None otherwise).
+    G_statics : ndarray or None
+        Stewart-Gough inverse Jacobian from statics (MR 7.2.1): qdot_a = G_statics V_s with
+        V_s = (omega_s, v_s); prismatic spatial legs only.
+    K : ndarray
+        End-effector twist Jacobian over all joint variables (``var_names``).
+    """
+
+    mech: Mechanism
+    q: np.ndarray
+    qa: np.ndarray
+    x: np.ndarray
+    success: bool
+    status: str
+    message: str
+    residual: float
+    W_a: np.ndarray
+    W_p: np.ndarray
+    W_ac: np.ndarray
+    W_pc: np.ndarray
+    W_c: np.ndarray
+    W: np.ndarray
+    W_x: np.ndarray
+    H: np.ndarray
+    H_a: np.ndarray
+    H_p: np.ndarray
+    J_a: np.ndarray
+    J_s: np.ndarray
+    K: np.ndarray
+    A: np.ndarray | None = None
+    B: np.ndarray | None = None
+    G_statics: np.ndarray | None = None
+    twist_names: tuple[str, ...] = ()
+    row_names: tuple[str, ...] = ()
+    var_names: tuple[str, ...] = ()
+    qa_names: tuple[str, ...] = ()
+    qp_names: tuple[str, ...] = ()
+    qc_names: tuple[str, ...] = ()
+    x_names: tuple[str, ...] = ()
+    info: dict[str, Any] = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ aliases
+    @property
+    def J(self) -> np.ndarray:
+        """The full kinematic constraint matrix of [7.48]/[7.49], columns (q_a, q_p, q_c)."""
+        top = np.hstack([self.W_a, self.W_p, np.zeros((self.W_a.shape[0], self.W_c.shape[1]))])
+        bot = np.hstack([self.W_ac, self.W_pc, self.W_c])
+        return np.vstack([top, bot])
+
+    @property
+    def J_task(self) -> np.ndarray:
+        """Rows of J_a for the task components of the mechanism (``mech.task``)."""
+        if self.mech.kind == "khalil":
+            return self.J_a[[_TASK_TO_TWIST[t] for t in self.mech.task]]
+        return self.J_a
+
+    # ------------------------------------------------------------------ rates
+    def passive_rates(self, qa_dot: Any) -> np.ndarray:
+        """qdot_p = W qdot_a [7.51] (platforms: the platform coordinate rates x_dot)."""
+        return self.W @ np.asarray(qa_dot, dtype=float)
+
+    def x_rates(self, qa_dot: Any) -> np.ndarray:
+        """Rates of the model's unknowns x for given active rates."""
+        return self.W_x @ np.asarray(qa_dot, dtype=float)
+
+    def joint_rates(self, qa_dot: Any) -> np.ndarray:
+        """All joint rates (``mech.joint_names`` order) for given active rates."""
+        qa_dot = np.asarray(qa_dot, dtype=float)
+        act = np.array(self.mech.actuated)
+        npas = int((~act).sum())
+        yp = _solve(self.H_p, -self.H_a @ qa_dot)
+        out = np.empty(act.size)
+        out[act] = qa_dot
+        out[~act] = yp[:npas]
+        return out
+
+    def twist(self, qa_dot: Any) -> np.ndarray:
+        """End-effector twist J_a qdot_a (rows ``twist_names``)."""
+        return self.J_a @ np.asarray(qa_dot, dtype=float)
+
+    def accel_term(self, qa_dot: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(Psi, Phi) of [7.52]: dJ/dt qdot for the velocities produced by ``qa_dot``.
+
+        Khalil mechanisms: rows in the order of [7.49] (top block Psi, bottom block Phi).
+        Platforms: Psi is the model rows' term d^2f/dt^2 at zero accelerations, Phi is empty.
+        """
+        f = analysis_functions(self.mech)
+        qa_dot = np.asarray(qa_dot, dtype=float)
+        if self.mech.kind == "khalil":
+            qd = self.joint_rates(qa_dot)
+            a = np.array(f.acc_q(self.q, qd)).ravel()
+            top, bot = self.info["rows_top"], self.info["rows_bottom"]
+            return a[top], a[bot]
+        xd = self.W_x @ qa_dot
+        a = np.array(f.acc_x(self.qa, self.x, qa_dot, xd)).ravel()
+        return a, np.zeros(0)
+
+    def passive_accelerations(self, qa_dot: Any, qa_ddot: Any) -> np.ndarray:
+        """x_ddot (all unknowns of the model) for active rates and accelerations [7.52]."""
+        f = analysis_functions(self.mech)
+        qa_dot = np.asarray(qa_dot, dtype=float)
+        qa_ddot = np.asarray(qa_ddot, dtype=float)
+        model = get_model(self.mech)
+        _, Wp, Wa = (np.array(v) for v in model.jac(self.qa, self.x))
+        xd = self.W_x @ qa_dot
+        a = np.array(f.acc_x(self.qa, self.x, qa_dot, xd)).ravel()
+        return _solve(Wp, -(Wa @ qa_ddot) - a)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"success": bool(self.success), "status": self.status,
+                               "message": self.message, "residual": float(self.residual)}
+        for k in ("q", "qa", "x", "W_a", "W_p", "W_ac", "W_pc", "W_c", "W", "W_x", "H_a", "H_p",
+                  "J_a", "J_s", "A", "B", "G_statics"):
+            v = getattr(self, k)
+            out[k] = None if v is None else np.asarray(v).tolist()
+        for k in ("twist_names", "row_names", "qa_names", "qp_names", "qc_names", "x_names"):
+            out[k] = list(getattr(self, k))
+        return out
+
+    def __repr__(self) -> str:
+        flag = "ok" if self.success else "NOT CLOSED"
+        return (f"Jacobians({self.mech.name!r}, {flag}, W_p {self.W_p.shape}, "
+                f"J_a {self.J_a.shape}, cond(W_p)={self.info.get('cond_W_p', np.nan):.3g})")
+
+
+def _spatial_from_twist(J6: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(v, omega) at the origin of the frame at p -> Modern Robotics (omega_s, v_s)."""
+    v, w = J6[:3], J6[3:]
+    vs = v - np.cross(w.T, p).T  # v_s = v - omega x p = v + p x omega
+    return np.vstack([w, vs])
+
+
+def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
+    """Velocity model of ``mech`` at the closed configuration ``q``.
+
+    Parameters
+    ----------
+    mech : Mechanism
+    q : array or KinResult
+        All joint values (``mech.joint_names`` order, as ``KinResult.q``) or a result of
+        :func:`optkin.forward` / :func:`optkin.inverse`.
+    tol : float
+        Largest closure residual max|Phi| (in the model's units) for ``success``.
+
+    Returns
+    -------
+    Jacobians
+        ``success=False`` (with a message) when q does not close the loops; the matrices
+        are then evaluated anyway.
+
+    Examples
+    --------
+    >>> import numpy as np, optkin
+    >>> m = optkin.mechanisms.sr400()
+    >>> r = optkin.forward(m, [0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    >>> jac = optkin.jacobians(m, r)
+    >>> np.round(jac.W @ [0, 1, 0, 0, 0, 0], 12).tolist()   # [7.41]: theta3dot = -theta2dot
+    [-1.0, 1.0]
+    """
+    model = get_model(mech)
+    f = analysis_functions(mech)
+    qv, qa, x = config_of(mech, q)
+    phi_m, Wp_m, Wa_m = (np.array(v) for v in model.jac(qa, x))
+    res = float(np.max(np.abs(phi_m))) if phi_m.size else 0.0
+    ok = res <= tol
+    msg = "" if ok else (
+        f"q does not close the loops (max |Phi| = {res:.2e} > tol {tol:g}); the matrices are "
+        "evaluated there anyway; solve with optkin.forward first"
+    )
+    W_x = _solve(Wp_m, -Wa_m)
+    act = np.array(mech.actuated)
+    tw = twist_rows(mech)
+    info: dict[str, Any] = {}
+    try:
+        info["cond_W_p"] = float(np.linalg.cond(Wp_m))
+    except np.linalg.LinAlgError:
+        info["cond_W_p"] = float("inf")
+    if mech.kind == "khalil":
+        z = qv
+        _, Jq, Kq = (np.array(v) for v in f.rows_q(z))
+        names = np.array(mech.joint_names)
+        cut = set(mech.cut_names)
+        ia = np.flatnonzero(act)
+        ip = np.array([i for i in range(len(names)) if not act[i] and names[i] not in cut], int)
+        ic = np.array([i for i in range(len(names)) if names[i] in cut], int)
+        Jc = Jq[:, ic]
+        scale = max(1.0, float(np.abs(Jq).max()))
+        has_c = np.any(np.abs(Jc) > 1e-7 * scale, axis=1) if ic.size else np.zeros(len(Jq), bool)
+        top = np.flatnonzero(~has_c)
+        bot = np.flatnonzero(has_c)
+        info["split"] = "rows"
+        W_a, W_p = Jq[np.ix_(top, ia)], Jq[np.ix_(top, ip)]
+        W_ac, W_pc, W_c = Jq[np.ix_(bot, ia)], Jq[np.ix_(bot, ip)], Jq[np.ix_(bot, ic)]
+        if bot.size != ic.size:
+            info["split"] = "inexact"
+            msg = (msg + "; " if msg else "") + (
+                f"{bot.size} closure rows involve the {ic.size} cut joint(s): the [7.49] "
+                "split is not square here")
+        info["rows_top"], info["rows_bottom"] = top, bot
+        W = _solve(W_p, -W_a) if W_p.size else np.zeros((0, ia.size))
+        H = Jq
+        H_a = Jq[:, ia]
+        H_p = Jq[:, ~act]
+        K = Kq
+        # twist per unit qdot_a through all joints: K_a + K_x W_x
+        J6 = Kq[:, ia] + Kq[:, ~act] @ W_x
+        T = model.pose(qa, x)
+        J_a = J6
+        row_names = tuple(np.array(f.row_names)[np.concatenate([top, bot])].tolist())
+        A = B = None
+        qp_names = tuple(names[ip].tolist())
+        qc_names = tuple(names[ic].tolist())
+    else:
+        W_a, W_p = Wa_m, Wp_m
+        W_ac = np.zeros((0, qa.size))
+        W_pc = np.zeros((0, x.size))
+        W_c = np.zeros((0, 0))
+        W = W_x
+        z = np.concatenate([qv, x])
+        _, H, K = (np.array(v) for v in f.rows_q(z))
+        nq = qv.size
+        pas = np.concatenate([~act, np.ones(x.size, bool)])
+        H_a = H[:, np.flatnonzero(act)]
+        H_p = H[:, pas]
+        Kx = np.array(f.twist_x(x))
+        J6 = Kx @ W_x  # (v, omega) of the platform frame
+        T = model.pose(qa, x)
+        J_a = J6[tw]
+        row_names = tuple(model.row_names)
+        # Chablat-Wenger: A t + B qdot_a = 0 on the leg rows (quaternion norm row dropped)
+        legrows = [i for i, n in enumerate(model.row_names) if n.startswith("leg:")]
+        E = _twist_to_xdot(mech.platform, x)
+        A = Wp_m[legrows] @ E
+        B = Wa_m[legrows]
+        qp_names = tuple(np.array(mech.joint_names)[~act].tolist())
+        qc_names = ()
+        info["nq"] = nq
+    J_s = _spatial_from_twist(J6, T[:3, 3])
+    G = None
+    if mech.kind == "legs" and mech.platform == "spatial" and all(
+            leg.type in ("UPS", "SPS") for leg in mech.legs):
+        G = stewart_gough_statics(mech, T)
+    return Jacobians(
+        mech=mech, q=qv, qa=qa, x=x, success=ok, status="optimal" if ok else "infeasible",
+        message=msg, residual=res, W_a=W_a, W_p=W_p, W_ac=W_ac, W_pc=W_pc, W_c=W_c, W=W,
+        W_x=W_x, H=H, H_a=H_a, H_p=H_p, J_a=J_a, J_s=J_s, K=K, A=A, B=B, G_statics=G,
+        twist_names=tuple(TWIST_NAMES[i] for i in tw), row_names=row_names,
+        var_names=f.var_names, qa_names=tuple(mech.active_names), qp_names=qp_names,
+        qc_names=qc_names, x_names=tuple(model.x_names), info=info,
+    )
+
+
+def _twist_to_xdot(platform: str, x: np.ndarray) -> np.ndarray:
+    """E(x): x_dot = E t for the platform twist t (rows of ``twist_rows``)."""
+    if platform == "spatial":
+        E = np.zeros((7, 6))
+        E[:3, :3] = np.eye(3)
+        E[3:, 3:] = 0.5 * _quat_rate_matrix(x[3:7])
+        return E
+    n = {"planar": 3, "planar_point": 2, "spatial_translational": 3}[platform]
+    return np.eye(n)
+
+
+def stewart_gough_statics(mech: Mechanism, T: np.ndarray) -> np.ndarray:
+    """The inverse Jacobian of a Stewart-Gough platform by statics (MR 7.2.1).
+
+    Row i is (-n_i x q_i, n_i)^T, with n_i the unit vector along leg i (from the base joint
+    q_i to the platform joint) and q_i the base joint centre, so that qdot_a = G V_s for
+    the spatial twist V_s = (omega_s, v_s) (J_s^-1 of MR).
+    """
+    R, p = T[:3, :3], T[:3, 3]
+    rows = []
+    for leg in mech.legs:
+        qi = np.asarray(leg.base, dtype=float)
+        Pi = p + R @ np.asarray(leg.platform, dtype=float)
+        n = (Pi - qi) / np.linalg.norm(Pi - qi)
+        rows.append(np.concatenate([-np.cross(n, qi), n]))
+    return np.array(rows)
