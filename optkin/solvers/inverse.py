@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 from scipy.stats import qmc
 
+from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..mechanism.geometry import wrap_angle
 from ..mechanism.legs import leg_inverse
@@ -101,8 +102,24 @@ def _inverse_legs(model: Model, T: np.ndarray, tol: float) -> SolutionSet:
     return SolutionSet(out, "postures", {"success": bool(out), "message": f"{len(out)} postures"})
 
 
-def _inverse_system(model: Model) -> tuple[ca.Function, ca.Function, np.ndarray, np.ndarray]:
-    """Newton step and residual of [Phi(q); task error(q)] = 0 over all joints (cached)."""
+def _newton_function(name, G, z, params, scale):
+    """A damped Newton step on G(z; params) = 0 and the residual max |G| (CasADi Function)."""
+    J = ca.jacobian(G, z)
+    dz = -ca.solve(J, G)
+    fG = ca.Function(name + "_G", [z, *params], [G])
+    zn = damped_step(fG, z, dz, scale, params)
+    step = ca.Function(name, [z, *params], [zn, ca.mmax(ca.fabs(G))])
+    return step, fG
+
+
+def _inverse_system(model: Model) -> dict[str, Any]:
+    """The Functions of the Khalil inverse model (cached on the model).
+
+    Following seed 000, 7.6: first the joints of the direct path base -> end effector are
+    solved from the task equations, then the remaining joints from the loop closure. When
+    the joint counts do not split that way, the whole system [Phi(q); task(q)] = 0 over all
+    joints is used instead.
+    """
     if model._inv is not None:
         return model._inv
     mech = model.mech
@@ -111,31 +128,58 @@ def _inverse_system(model: Model) -> tuple[ca.Function, ca.Function, np.ndarray,
     Td = ca.SX.sym("Td", 4, 4)
     T = kh.frames_0(mech, q)
     rows, names = kh.closure_rows(mech, T)
-    keep = [names.index(n) for n in model.row_names]
-    phi = rows[keep]
+    phi = rows[[names.index(n) for n in model.row_names]]
     Te = T[mech.end_effector]
     comps = {"x": Te[0, 3] - Td[0, 3], "y": Te[1, 3] - Td[1, 3], "z": Te[2, 3] - Td[2, 3]}
     g = kh.gibbs(ca.mtimes(Te[:3, :3], Td[:3, :3].T))
     comps.update({"rx": g[0], "ry": g[1], "rz": g[2]})
-    G = ca.vertcat(phi, *[comps[c] for c in mech.task])
-    if G.shape[0] != nq:
-        from ..errors import MechanismError
-
+    task = ca.vertcat(*[comps[c] for c in mech.task])
+    if phi.shape[0] + task.shape[0] != nq:
         raise MechanismError(
             f"task: the inverse model needs as many equations as joints: {phi.shape[0]} closure "
             f"rows + {len(mech.task)} task components != {nq} joints; choose task components "
             "matching the degrees of freedom"
         )
-    J = ca.jacobian(G, q)
     revolute = np.array(mech.revolute, dtype=bool)
     scale = np.where(revolute, 1.0, model.length)
-    dq = -ca.solve(J, G)
-    fG = ca.Function("G", [q, Td], [G])
-    qn = damped_step(fG, q, dq, scale, [Td])
-    step = ca.Function("inv_step", [q, Td], [qn, ca.mmax(ca.fabs(G))])
-    res = ca.Function("inv_res", [q, Td], [G])
-    model._inv = (step, res, revolute, scale)
-    return model._inv
+    index = {n: i for i, n in enumerate(mech.joint_names)}
+    path = [index[f.name] for f in (mech.table.frames[j - 1] for j in mech.table.chain(
+        mech.end_effector)) if f.is_joint]
+    off = [i for i in range(nq) if i not in path]
+    out: dict[str, Any] = {"revolute": revolute, "scale": scale, "path": path, "off": off,
+                           "task": ca.Function("task", [q, Td], [task])}
+    if len(path) == task.shape[0] and len(off) == phi.shape[0]:
+        zp, zo = ca.SX.sym("zp", len(path)), ca.SX.sym("zo", len(off))
+        qq = ca.SX.zeros(nq)
+        qq[path] = zp
+        qq[off] = zo
+        t1 = ca.substitute(task, q, qq)
+        # the task equations depend on the path joints only ([7.11])
+        t1 = ca.substitute(t1, zo, ca.DM.zeros(len(off)))
+        out["stage1"] = _newton_function("inv_path", t1, zp, [Td], scale[path])[0]
+        p2 = ca.substitute(phi, q, qq)
+        out["stage2"] = _newton_function("inv_loops", p2, zo, [zp], scale[off])[0]
+    else:
+        G = ca.vertcat(phi, task)
+        out["joint"] = _newton_function("inv_all", G, q, [Td], scale)[0]
+    model._inv = out
+    return out
+
+
+def _multistart(step, params: np.ndarray, lo, hi, n: int, iters: int, seed: int):
+    """Batched Newton from n Sobol starts in the box [lo, hi]; returns (Z, residuals)."""
+    dim = len(lo)
+    U = qmc.Sobol(dim, scramble=True, seed=seed).random(n)
+    Z = (lo + U * (hi - lo)).T
+    fmap = step.map(n, "thread", 2)
+    P = np.tile(params, (1, n))
+    for _ in range(iters):
+        Zn, _ = fmap(Z, P)
+        Zn = np.array(Zn)
+        good = np.all(np.isfinite(Zn), axis=0)
+        Z[:, good] = Zn[:, good]
+    _, r = fmap(Z, P)
+    return Z, np.array(r).ravel()
 
 
 def distinct(
@@ -158,45 +202,59 @@ def distinct(
 
 def _inverse_khalil(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
     mech = model.mech
-    step, res, revolute, scale = _inverse_system(model)
+    sysf = _inverse_system(model)
+    revolute, scale = sysf["revolute"], sysf["scale"]
     nq = len(mech.joint_names)
-    n = int(opts["starts"])
+    n, iters, seed = int(opts["starts"]), int(opts["iters"]), int(opts["seed"])
     tol = float(opts["tol"])
     t0 = timer()
-    sob = qmc.Sobol(nq, scramble=True, seed=int(opts["seed"]))
-    U = sob.random(n)
     lo = np.where(revolute, -np.pi, -2 * model.length)
     hi = np.where(revolute, np.pi, 2 * model.length)
-    Q = (lo + U * (hi - lo)).T  # nq x n
-    fmap = step.map(n, "thread", 2)
-    Td = np.tile(T, (1, n))
-    r = np.full(n, np.inf)
-    for _ in range(int(opts["iters"])):
-        Qn, r = fmap(Q, Td)
-        Qn = np.array(Qn)
-        r = np.array(r).ravel()
-        good = np.all(np.isfinite(Qn), axis=0)
-        Q[:, good] = Qn[:, good]
-    _, r = fmap(Q, Td)
-    r = np.array(r).ravel()
-    ok = np.flatnonzero(r <= 1e3 * tol)
-    Qok = Q[:, ok]
-    Qok[revolute] = wrap_angle(Qok[revolute])
-    idx = distinct(Qok, revolute, scale, 1e-6)
+    candidates: list[np.ndarray] = []
+    runs = 0
+    if "stage1" in sysf:
+        path, off = sysf["path"], sysf["off"]
+        Zp, r1 = _multistart(sysf["stage1"], T, lo[path], hi[path], n, iters, seed)
+        runs += n
+        ok1 = np.flatnonzero(r1 <= 1e3 * tol)
+        Zp = Zp[:, ok1]
+        Zp[revolute[path]] = wrap_angle(Zp[revolute[path]])
+        for j in distinct(Zp, revolute[path], scale[path]):
+            zp = Zp[:, j]
+            n2 = max(32, n // 4)
+            Zo, r2 = _multistart(sysf["stage2"], zp[:, None], lo[off], hi[off], n2, iters, seed + 1)
+            runs += n2
+            for i in np.flatnonzero(r2 <= 1e3 * tol):
+                qv = np.empty(nq)
+                qv[path] = zp
+                qv[off] = Zo[:, i]
+                candidates.append(qv)
+    else:
+        Q, r = _multistart(sysf["joint"], T, lo, hi, n, iters, seed)
+        runs += n
+        candidates = [Q[:, i] for i in np.flatnonzero(r <= 1e3 * tol)]
+    converged = len(candidates)
+    if candidates:
+        Q = np.array(candidates).T
+        Q[revolute] = wrap_angle(Q[revolute])
+        idx = distinct(Q, revolute, scale, 1e-6)
+    else:
+        Q, idx = np.zeros((nq, 0)), []
     act = np.array(mech.actuated)
     out: list[KinResult] = []
     for j in idx:
-        q = Qok[:, j]
-        # final polish of the closure with the active joints fixed
+        q = Q[:, j]
         qa = q[act]
+        # final polish of the closure with the active joints fixed
         x, _, nit, _ = newton(model, qa, q[~act], tol, 5)
-        stats = SolverStats("newton-multistart", 0.0, timer() - t0, int(opts["iters"]), "khalil",
-                            {"starts": n, "converged": int(ok.size)})
+        stats = SolverStats("newton-multistart", 0.0, timer() - t0, iters, "khalil",
+                            {"starts": runs, "converged": converged})
         kr = make_result(model, qa, x, tol, nit, stats)
-        task_err = float(np.max(np.abs(np.array(res(kr.q, T)).ravel())))
-        if task_err > 1e-8:
+        task_err = float(np.max(np.abs(np.array(sysf["task"](kr.q, T)).ravel())))
+        if not kr.success or task_err > 1e-8:
             continue
         out.append(kr)
-    info = {"success": bool(out), "starts": n, "converged": int(ok.size),
-            "message": f"{len(out)} postures from {n} starts ({ok.size} converged)"}
-    return SolutionSet(out, "postures", info, seed=int(opts["seed"]))
+    method = "direct path then loops (7.6)" if "stage1" in sysf else "all joints"
+    info = {"success": bool(out), "starts": runs, "converged": converged, "method": method,
+            "message": f"{len(out)} postures from {runs} starts ({converged} converged; {method})"}
+    return SolutionSet(out, "postures", info, seed=seed)
