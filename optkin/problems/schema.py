@@ -203,7 +203,7 @@ def _list_of(item: Callable[[Any], Any], what: str, n: int | None = None, min_n:
         if errors:
             i, e = errors[0]
             raise PydanticCustomError(
-                "item", "{__loc__}" + e.message(), {"__loc__": f"[{i}]", **(e.context or {})}
+                "item", "{__loc__}" + e.message(), {"__loc__": f"[{i}]"}
             )
         return out
 
@@ -309,6 +309,14 @@ class Rpr3Args(Strict):
     home: Numbers(3) | None = None
 
 
+class Rpr4Args(Strict):
+    """Planar 4-RPR (redundantly actuated): 4 base and 4 platform points."""
+
+    base: Points(4, 2)
+    platform: Points(4, 2)
+    home: Numbers(3) | None = None
+
+
 class Rrr3Args(Strict):
     """Planar 3-RRR: attachment points and link lengths (one for all legs, or 3)."""
 
@@ -382,6 +390,7 @@ class Akr3000Args(Strict):
 #: without a model here still works; its arguments are then checked by the library.
 LIBRARY_ARG_MODELS: dict[str, type[Strict]] = {
     "rpr3": Rpr3Args,
+    "rpr4": Rpr4Args,
     "rrr3": Rrr3Args,
     "five_bar": FiveBarArgs,
     "four_bar": FourBarArgs,
@@ -480,6 +489,7 @@ class LegsMechanism(Strict):
     platform: Literal["planar", "planar_point", "spatial", "spatial_translational"] = "spatial"
     legs: Annotated[list[Leg], Field(min_length=1)]
     home: Numbers() | None = None
+    redundant: Bool = False
 
 
 MechanismSpec = Annotated[
@@ -1095,9 +1105,14 @@ def _check_khalil(m: KhalilMechanism, fn: str) -> None:
 def _check_legs(m: LegsMechanism, fn: str) -> None:
     dim = _PLATFORM_DIM[m.platform]
     want = _PLATFORM_LEGS[m.platform]
-    if len(m.legs) != want:
+    if m.redundant and len(m.legs) < want:
         raise _fail(fn, ["mechanism", "legs"],
-                    f"a {m.platform} platform needs {want} legs, got {len(m.legs)}")
+                    f"a redundantly actuated {m.platform} platform needs at least {want} legs, "
+                    f"got {len(m.legs)}")
+    if not m.redundant and len(m.legs) != want:
+        extra = "; set redundant = true for redundant actuation" if len(m.legs) > want else ""
+        raise _fail(fn, ["mechanism", "legs"],
+                    f"a {m.platform} platform needs {want} legs, got {len(m.legs)}{extra}")
     for i, leg in enumerate(m.legs):
         base = ["mechanism", "legs", i]
         planar_leg = leg.type in _PLANAR_LEGS
@@ -1183,7 +1198,9 @@ def build_mechanism(spec: ProblemFile, filename: str = "<problem>") -> Any:
         if isinstance(m, LegsMechanism):
             _check_legs(m, filename)
             legs = [leg.model_dump(exclude_none=True) for leg in m.legs]
-            kw = {"home": m.home} if m.home is not None else {}
+            kw: dict[str, Any] = {"home": m.home} if m.home is not None else {}
+            if m.redundant:
+                kw["redundant"] = True
             return optkin.Mechanism.from_legs(legs, platform=m.platform, name=m.name, **kw)
     except ProblemFileError:
         raise
@@ -1229,7 +1246,7 @@ def check_problem(spec: ProblemFile, filename: str = "<problem>") -> Any:
     active = tuple(getattr(mech, "active_names", ()) or ())
     joints = tuple(getattr(mech, "joint_names", ()) or ())
     dof = getattr(mech, "dof", None)
-    if _is_int(dof) and active and len(active) != dof:
+    if _is_int(dof) and active and len(active) != dof and not getattr(mech, "redundant", False):
         where = "rows" if isinstance(spec.mechanism, KhalilMechanism) else (
             "legs" if isinstance(spec.mechanism, LegsMechanism) else "args")
         raise _fail(filename, ["mechanism", where],
