@@ -12,6 +12,7 @@ from .mechanism import Leg, Mechanism
 from .model import get_model
 from .results import KinResult, SolutionSet, SolverStats
 from .solvers import forward, inverse
+from .solvers.batch import BatchResult, forward_batch
 
 __version__ = "0.1.0"
 
@@ -27,7 +28,9 @@ __all__ = [
     "SolverError",
     "SolverStats",
     "__version__",
+    "BatchResult",
     "forward",
+    "forward_batch",
     "get_model",
     "inverse",
     "jacobians",

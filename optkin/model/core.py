@@ -21,6 +21,8 @@ from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..mechanism.geometry import homogeneous, matrix_to_quat, rot2, wrap_angle
 from ..mechanism.legs import leg_forward, leg_joints
+from . import compiled as cc
+from . import fused
 from . import khalil as kh
 from . import legs as lg
 
@@ -28,6 +30,8 @@ __all__ = ["Model", "get_model", "clear_cache"]
 
 _CACHE: dict[str, Model] = {}
 _LOCK = threading.Lock()
+#: forward() calls on one model after which it is compiled (OPTKIN_COMPILE=auto)
+HOT_USES = 100
 
 
 def get_model(mech: Mechanism) -> Model:
@@ -133,6 +137,20 @@ class Model:
         xn = damped_step(fphi, x, dx, self.x_scale, [qa])
         res = ca.mmax(ca.fabs(phi)) if self.m else ca.SX(0)
         self.step = ca.Function("newton_step", [qa, x], [xn, res], ["qa", "x"], ["x_next", "res"])
+        # compiled twins (optkin.model.compiled): loaded from the disk cache when present
+        self.step_sx = self.step  # the interpreted step (for symbolic use)
+        self.compiled_step: ca.Function | None = None
+        self.compiled_fns: dict[str, ca.Function] = {}
+        self.uses = 0
+        self._tls = threading.local()
+        self._gen = 0
+        self._result_fn: ca.Function | None = None
+        self._tracker: dict[tuple[int, int], ca.Function] = {}
+        self._compile_lock = threading.Lock()
+        self._compile_failed = False
+        mode = cc.compile_mode()
+        if mode != "off":
+            self.compile(build=mode == "eager")
         self.build_time = time.perf_counter() - t0
 
     # -------------------------------------------------------------- conversions
@@ -222,7 +240,8 @@ class Model:
     def canonical_x(self, x: np.ndarray) -> np.ndarray:
         """Angles wrapped to (-pi, pi], quaternions normalised with w >= 0."""
         x = np.array(x, dtype=float)
-        x[self.x_angle] = wrap_angle(x[self.x_angle])
+        if self.x_angle.any():
+            x[self.x_angle] = wrap_angle(x[self.x_angle])
         if self.mech.kind == "legs" and self.mech.platform == "spatial":
             qq = x[3:7] / np.linalg.norm(x[3:7])
             x[3:7] = qq if qq[0] >= 0 else -qq
@@ -253,9 +272,100 @@ class Model:
             return np.concatenate([p, [1.0, 0.0, 0.0, 0.0]])
         return p
 
+    # -------------------------------------------------------------- compiled code
+    def __reduce__(self):
+        return (get_model, (self.mech,))
+
+    @property
+    def compiled(self) -> bool:
+        """True when the compiled C Functions are in use."""
+        return self.compiled_step is not None
+
+    def result_fn(self) -> ca.Function:
+        """(q_a, x) -> (Phi, W_p, T, q) in one evaluation (compiled when available)."""
+        f = self.compiled_fns.get("result")
+        if f is None:
+            if self._result_fn is None:
+                self._result_fn = fused.result_function(self)
+            f = self._result_fn
+        return f
+
+    def compile(self, build: bool = True) -> bool:
+        """Use compiled C versions of the step, residual, Jacobians, pose and result.
+
+        Loads them from the disk cache, or (``build=True``) generates and compiles them
+        with the system C compiler (see :mod:`optkin.model.compiled`). ``step`` becomes the
+        compiled Newton step; ``phi``, ``jac`` and ``pose_fn`` stay the SX Functions (they
+        are used symbolically), their compiled twins are in ``compiled_fns``. Returns
+        whether compiled code is in use; without a compiler nothing changes.
+        """
+        if self.compiled_step is not None:
+            return True
+        if self._compile_failed and build:
+            return False
+        with self._compile_lock:
+            if self.compiled_step is not None:
+                return True
+            if self._result_fn is None:
+                self._result_fn = fused.result_function(self)
+            funcs = [self.phi, self.jac, self.step_sx, self.pose_fn, self._result_fn]
+            lib = cc.library("core:" + self.mech.key, funcs, build=build)
+            if lib is None:
+                self._compile_failed = build
+                return False
+            self.compiled_fns = lib
+            self.step = lib["newton_step"]
+            self._batch = {}
+            self._gen += 1
+            self.compiled_step = lib["newton_step"]
+        return True
+
+    def note_use(self) -> None:
+        """Count a solve; compile (``OPTKIN_COMPILE=auto``) once the model is in heavy use."""
+        self.uses += 1
+        if self.uses == HOT_USES and self.compiled_step is None and cc.compile_mode() != "off":
+            self.compile()
+
+    def fast(self, name: str) -> cc.FastFn:
+        """A per-thread buffered evaluator of ``newton_step``, ``result``, ``Phi``, ``W``,
+        ``pose`` (compiled when available); outputs are reused buffers, copy what you keep."""
+        d = getattr(self._tls, "d", None)
+        if d is None or self._tls.gen != self._gen:
+            d = self._tls.d = {}
+            self._tls.gen = self._gen
+        ev = d.get(name)
+        if ev is None:
+            f = self.compiled_fns.get(name)
+            if f is None:
+                interp = {"newton_step": self.step_sx, "Phi": self.phi, "W": self.jac,
+                          "pose": self.pose_fn}
+                f = interp[name] if name in interp else self.result_fn()
+            ev = d[name] = cc.FastFn(f)
+        return ev
+
+    def compiled_batch_step(self, n: int) -> ca.Function:
+        """The compiled Newton step mapped over n columns (threads); compiles if needed,
+        falls back to the interpreted step without a compiler."""
+        self.compile()
+        return self.batch_step(n)
+
+    def tracker(self, chunk: int, iters: int = 2) -> tuple[ca.Function, bool]:
+        """The path tracker of ``forward_batch`` over ``chunk`` points (``mapaccum`` of
+        :func:`optkin.model.fused.tracker_function`), and whether it is compiled."""
+        key = (int(chunk), int(iters))
+        f = self._tracker.get(key)
+        if f is None:
+            one = fused.tracker_function(self, iters)
+            f = one.mapaccum(f"track_{chunk}_{iters}", int(chunk), 2)
+            lib = cc.library(f"track:{self.mech.key}:{chunk}:{iters}", [f])
+            if lib is not None:
+                f = lib[f.name()]
+            self._tracker[key] = f
+        return f, isinstance(f, ca.Function) and f.is_a("External")
+
     # -------------------------------------------------------------- solvers
     def batch_step(self, n: int) -> ca.Function:
-        """The Newton step mapped over n columns (threads)."""
+        """The Newton step mapped over n columns (threads); compiled when available."""
         f = self._batch.get(n)
         if f is None:
             f = self.step.map(n, "thread", 2)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections.abc import Mapping
@@ -46,11 +47,15 @@ def check_qa(model: Model, qa: Any) -> np.ndarray:
         bad = [mech.active_names[i] for i in np.flatnonzero(~np.isfinite(a))]
         raise MechanismError(f"qa: non-finite value for {bad}; give finite joint values")
     if mech.kind == "legs":
-        for i, name in enumerate(mech.active_names):
-            if name.endswith(".rho") and a[i] <= 0:
-                raise MechanismError(
-                    f"qa[{i}] ({name}): a leg length must be positive, got {a[i]:g}"
-                )
+        rho = getattr(model, "_rho_index", None)
+        if rho is None:
+            rho = model._rho_index = np.array(
+                [i for i, n in enumerate(mech.active_names) if n.endswith(".rho")], dtype=int)
+        if rho.size and np.min(a[rho]) <= 0:
+            i = int(rho[np.argmin(a[rho])])
+            raise MechanismError(
+                f"qa[{i}] ({mech.active_names[i]}): a leg length must be positive, got {a[i]:g}"
+            )
     return a
 
 
@@ -94,30 +99,47 @@ def parse_guess(model: Model, qa: np.ndarray, guess: Any) -> np.ndarray:
 def newton(model: Model, qa: np.ndarray, x: np.ndarray, tol: float, max_iter: int):
     """Damped Newton iterations (7.9). Returns (x, residual, iterations, converged).
 
-    Once the residual is below ``tol``, up to two more steps polish it to round-off.
+    Once the residual is below ``tol``, up to two more steps polish it to round-off. The
+    step is evaluated through a buffered (and, when available, compiled) Function.
     """
-    step = model.step
+    ev = model.fast("newton_step")
+    qa = np.asarray(qa, dtype=float)
     best_x, best_r = x, np.inf
     extra = 0
+    floor = 1e-14 * max(1.0, model.length)
     for it in range(max_iter):
-        xn, r = step(qa, x)
-        r = float(r)
+        xn, rr = ev(qa, x)
+        r = float(rr[0])
         if r < best_r:
             best_x, best_r = x, r
         if r <= tol:
             extra += 1
-            if extra > 2 or r < 1e-14 * max(1.0, model.length):
+            if extra > 2 or r < floor:
                 return best_x, best_r, it, True
         elif extra:
             return best_x, best_r, it, best_r <= tol
-        xn = np.array(xn).ravel()
-        if not np.all(np.isfinite(xn)) or not np.isfinite(r):
+        if not (math.isfinite(r) and math.isfinite(float(xn.sum()))):
             return best_x, best_r, it, best_r <= tol
-        x = xn
-    r = float(np.max(np.abs(model.residual(qa, x)))) if model.m else 0.0
+        x = xn.copy()
+    if model.m:
+        phi = model.fast("Phi")(qa, x)[0]
+        r = float(np.max(np.abs(phi)))
+    else:
+        r = 0.0
     if r < best_r:
         best_x, best_r = x, r
     return best_x, best_r, max_iter, best_r <= tol
+
+
+def _masks(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    m = getattr(model, "_result_masks", None)
+    if m is None:
+        mech = model.mech
+        act = np.array(mech.actuated, dtype=bool)
+        cut = set(mech.cut_names)
+        is_cut = np.array([n in cut for n in mech.joint_names], dtype=bool)
+        m = model._result_masks = (np.flatnonzero(~act & ~is_cut), np.flatnonzero(is_cut))
+    return m
 
 
 def make_result(
@@ -134,13 +156,15 @@ def make_result(
 ) -> KinResult:
     mech = model.mech
     x = model.canonical_x(x)
-    _, Wp, _ = model.jac(qa, x)
-    phi = model.residual(qa, x)
-    res = float(np.max(np.abs(phi))) if phi.size else 0.0
-    finite = np.all(np.isfinite(x)) and np.isfinite(res)
-    Wp = np.array(Wp)
+    qa = np.array(qa, dtype=float)
+    # one fused evaluation: Phi, W_p, the pose and all joints (optkin.model.fused)
+    phi_b, wp_b, T_b, q_b = model.fast("result")(qa, x)
+    res = float(np.max(np.abs(phi_b))) if phi_b.size else 0.0
+    finite = bool(np.isfinite(x).all()) and math.isfinite(res)
+    Wp = wp_b.reshape((model.nx, model.m)).T
     try:
-        cond = float(np.linalg.cond(Wp)) if finite else float("inf")
+        sv = np.linalg.svd(Wp, compute_uv=False) if finite and Wp.size else None
+        cond = float(sv[0] / sv[-1]) if sv is not None and sv[-1] > 0 else float("inf")
     except np.linalg.LinAlgError:
         cond = float("inf")
     success = bool(finite and res <= tol)
@@ -150,26 +174,25 @@ def make_result(
         if success:
             message = f"closure satisfied: max |Phi| = {res:.2e}"
         else:
-            worst = model.row_names[int(np.nanargmax(np.abs(phi)))] if phi.size and finite else "?"
+            worst = (model.row_names[int(np.nanargmax(np.abs(phi_b)))]
+                     if phi_b.size and finite else "?")
             message = (
                 f"the loops do not close for these inputs: max |Phi| = {res:.2e} "
                 f"(worst row {worst}); the active joint values may be out of reach"
             )
     if finite:
-        q = model.to_q(qa, x)
-        pose = model.pose(qa, x)
+        q = q_b.copy()
+        pose = T_b.reshape((4, 4)).T.copy()
     else:
         q = np.full(len(mech.joint_names), np.nan)
         pose = np.full((4, 4), np.nan)
-    act = np.array(mech.actuated)
-    cut = set(mech.cut_names)
-    is_cut = np.array([n in cut for n in mech.joint_names], dtype=bool)
+    ip, ic = _masks(model)
     stats.nit = nit
     return KinResult(
         q=q,
-        qa=np.asarray(qa, dtype=float).copy(),
-        qp=q[~act & ~is_cut],
-        qc=q[is_cut],
+        qa=qa,
+        qp=q[ip],
+        qc=q[ic],
         x=x,
         pose=pose,
         success=success,

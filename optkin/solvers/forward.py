@@ -57,6 +57,7 @@ def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinR
     """
     opts = merge_options(FORWARD_DEFAULTS, options, "forward")
     model = get_model(mech)
+    model.note_use()  # compiles the model's Functions once it is in heavy use
     qa = check_qa(model, qa)
     x0 = parse_guess(model, qa, guess)
     tol = float(opts["tol"])

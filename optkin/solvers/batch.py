@@ -1,0 +1,308 @@
+"""Many direct-model solves at once: ``forward_batch``.
+
+Two layouts of the work, both on compiled CasADi code when a C compiler is present
+(:mod:`optkin.model.compiled`; interpreted Functions otherwise):
+
+* ``path=True`` (default): the rows of ``QA`` are consecutive points of a path. The first
+  is solved by :func:`optkin.forward` from ``guess``; then chunks of ``chunk`` points are
+  tracked in one compiled call each (``Function.mapaccum``): at every point the Euler
+  predictor x - W_p^-1 W_a dq_a (the velocity model [7.51]) and ``iters`` Newton
+  corrections (7.9), the last solution of a chunk seeding the next chunk. A point whose
+  residual stays above ``tol`` is re-solved by :func:`optkin.forward` (damped Newton, then
+  IPOPT) from the previous solution, and tracking resumes from it. The assembly mode is
+  the one of the first point, followed continuously.
+* ``path=False``: the rows are independent; all start from ``guess`` (one guess, or one
+  row of unknowns per solve) and the compiled damped Newton step, mapped over ``chunk``
+  columns with threads (``Function.map(chunk, "thread", threads)``), iterates until each
+  converges; the rest falls back to :func:`optkin.forward`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import MechanismError
+from ..mechanism import Mechanism
+from ..model import Model, get_model
+from ..model.compiled import FastFn
+from ..results import KinResult, SolverStats
+from .common import check_qa, make_result, merge_options, parse_guess, timer
+from .forward import forward
+
+__all__ = ["forward_batch", "BatchResult", "BATCH_DEFAULTS"]
+
+#: Options of :func:`forward_batch` and their defaults.
+BATCH_DEFAULTS: dict[str, Any] = {
+    "path": True,  # rows are consecutive points of a path (warm-started tracking)
+    "tol": 1e-10,  # max |Phi| for success
+    "chunk": 128,  # points per compiled call (one compiled library per chunk size)
+    "iters": 2,  # path: Newton corrections after the Euler predictor
+    "max_iter": 40,  # independent rows: damped Newton iterations
+    "threads": 2,  # independent rows: threads of the mapped step
+    "fallback": True,  # re-solve failed points with optkin.forward (Newton, then IPOPT)
+}
+
+
+@dataclass
+class BatchResult:
+    """The outcome of :func:`forward_batch`: one row per solve.
+
+    Attributes
+    ----------
+    x : ndarray (n, nx)
+        The unknowns (``x_names``) of every solve.
+    qa : ndarray (n, na)
+        The active joint values, as given.
+    success : ndarray of bool (n,)
+        Whether max |Phi| <= tol at each row.
+    residual : ndarray (n,)
+        max |Phi| at each row.
+    nit : ndarray of int (n,)
+        Newton iterations (corrections) spent on each row.
+    status, message : str
+        ``"optimal"`` when every row closed, else ``"infeasible"``; a sentence.
+    stats : SolverStats
+        ``extra`` holds ``compiled`` (bool), ``fallback`` (rows re-solved by ``forward``),
+        ``chunks`` (compiled calls) and ``chunk``.
+    """
+
+    x: np.ndarray
+    qa: np.ndarray
+    success: np.ndarray
+    residual: np.ndarray
+    nit: np.ndarray
+    status: str
+    message: str
+    stats: SolverStats = field(default_factory=SolverStats)
+    x_names: tuple[str, ...] = ()
+    model: Model | None = field(default=None, repr=False)
+
+    def __len__(self) -> int:
+        return int(self.x.shape[0])
+
+    @property
+    def all_success(self) -> bool:
+        return bool(np.all(self.success))
+
+    def result(self, i: int, tol: float = 1e-10) -> KinResult:
+        """Row ``i`` as a full :class:`KinResult` (joints, pose, cond(W_p))."""
+        st = SolverStats(self.stats.solver, 0.0, 0.0, int(self.nit[i]), self.stats.raw_status)
+        return make_result(self.model, self.qa[i], self.x[i], tol, int(self.nit[i]), st)
+
+    def q(self) -> np.ndarray:
+        """All joint values (n, nq), in ``mech.joint_names`` order."""
+        ev = self.model.fast("result")
+        out = np.empty((len(self), len(self.model.mech.joint_names)))
+        for i in range(len(self)):
+            out[i] = ev(self.qa[i], self.model.canonical_x(self.x[i]))[3]
+        return out
+
+    def poses(self) -> np.ndarray:
+        """End-effector poses (n, 4, 4)."""
+        ev = self.model.fast("result")
+        out = np.empty((len(self), 4, 4))
+        for i in range(len(self)):
+            out[i] = ev(self.qa[i], self.x[i])[2].reshape(4, 4).T
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "x": self.x.tolist(), "qa": self.qa.tolist(), "success": self.success.tolist(),
+            "residual": self.residual.tolist(), "nit": self.nit.tolist(),
+            "status": self.status, "message": self.message, "stats": self.stats.to_dict(),
+            "x_names": list(self.x_names),
+        }
+
+
+def _as_rows(model: Model, QA: Any) -> np.ndarray:
+    na = model.na
+    try:
+        A = np.array(QA, dtype=float)
+    except (TypeError, ValueError):
+        raise MechanismError(f"QA: expected an (n, {na}) array of active joint values") from None
+    if A.ndim == 1 and A.size == na:
+        A = A[None, :]
+    if A.ndim != 2 or na not in A.shape:
+        raise MechanismError(
+            f"QA: expected an (n, {na}) array, one row of active joint values "
+            f"{list(model.mech.active_names)} per solve; got shape {A.shape}"
+        )
+    if A.shape[1] != na:  # (na, n): columns
+        A = A.T
+    if not np.all(np.isfinite(A)):
+        raise MechanismError("QA: has non-finite entries; give finite joint values")
+    rho = [i for i, n in enumerate(model.mech.active_names) if n.endswith(".rho")]
+    if rho and A.size and np.min(A[:, rho]) <= 0:
+        raise MechanismError("QA: leg lengths (.rho columns) must be positive")
+    return np.ascontiguousarray(A)
+
+
+def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -> BatchResult:
+    """Solve the direct geometric model for many active joint vectors at once.
+
+    Parameters
+    ----------
+    mech : Mechanism
+    QA : array (n, na)
+        One row of active joint values per solve (``mech.active_names`` order). An
+        (na, n) array (one column per solve, CasADi's layout) is accepted when n != na.
+    guess : optional
+        ``path=True``: the start of the first point, as for :func:`optkin.forward` (None, a
+        KinResult, x, q, a pose...). ``path=False``: the same for every row, or an (n, nx)
+        array of unknowns, one row per solve.
+    **options
+        See :data:`BATCH_DEFAULTS`.
+
+    Returns
+    -------
+    BatchResult
+        Rows of unknowns, residuals and success flags; ``result(i)`` gives a KinResult.
+
+    Examples
+    --------
+    >>> import numpy as np, optkin
+    >>> m = optkin.mechanisms.five_bar(1.0, 1.0, 1.0, 1.0, 1.0)
+    >>> t = np.linspace(0, 0.3, 50)
+    >>> QA = np.c_[1.2 + t, 1.9 - t]
+    >>> b = optkin.forward_batch(m, QA)
+    >>> b.all_success, b.x.shape
+    (True, (50, 2))
+    """
+    opts = merge_options(BATCH_DEFAULTS, options, "forward_batch")
+    model = get_model(mech)
+    A = _as_rows(model, QA)
+    tol = float(opts["tol"])
+    chunk = max(1, int(opts["chunk"]))
+    model.compile()
+    if opts["path"]:
+        return _track(model, A, guess, tol, chunk, int(opts["iters"]), bool(opts["fallback"]))
+    return _independent(model, A, guess, tol, chunk, int(opts["max_iter"]),
+                        max(1, int(opts["threads"])), bool(opts["fallback"]))
+
+
+def _finish(model: Model, A, X, R, nit, tol, solver, t0, extra) -> BatchResult:
+    ok = np.isfinite(R) & (R <= tol)
+    n = A.shape[0]
+    nbad = int(n - ok.sum())
+    status = "optimal" if nbad == 0 else "infeasible"
+    if nbad == 0:
+        msg = f"{n} solves closed: max |Phi| = {R.max() if n else 0.0:.2e}"
+    else:
+        first = int(np.flatnonzero(~ok)[0])
+        msg = (f"{nbad} of {n} solves did not close (first at row {first}, max |Phi| = "
+               f"{R[first]:.2e}); those active joint values may be out of reach")
+    stats = SolverStats(solver, 0.0, timer() - t0, int(nit.sum()), status, extra)
+    return BatchResult(X, A, ok, R, nit, status, msg, stats, tuple(model.x_names), model)
+
+
+def _track(model: Model, A, guess, tol, chunk, iters, fallback) -> BatchResult:
+    t0 = timer()
+    n, na, nx = A.shape[0], model.na, model.nx
+    X = np.full((n, nx), np.nan)
+    R = np.full(n, np.inf)
+    nit = np.zeros(n, dtype=int)
+    if n == 0:
+        return _finish(model, A, X, R, nit, tol, "track", t0, {})
+    f, compiled = model.tracker(chunk, iters)
+    ev = FastFn(f)
+    first = forward(model.mech, A[0], guess=guess, tol=tol)
+    X[0], R[0], nit[0] = first.x, first.residual, first.nit
+    xs, qs = np.array(first.x, dtype=float), A[0].copy()
+    Qc = np.empty((chunk, na))
+    Xc = np.empty((chunk, nx))
+    Rc = np.empty(chunk)
+    junk = np.empty((chunk, na))
+    i, calls, nfall = 1, 0, 0
+    while i < n:
+        k = min(chunk, n - i)
+        Qc[:k] = A[i:i + k]
+        Qc[k:] = A[i + k - 1]
+        ev.into([xs, qs, Qc], [Xc, junk, Rc])
+        calls += 1
+        good = np.isfinite(Rc[:k]) & (Rc[:k] <= tol)
+        j = k if good.all() else int(np.argmin(good))
+        X[i:i + j] = Xc[:j]
+        R[i:i + j] = Rc[:j]
+        nit[i:i + j] = iters
+        if j > 0:
+            xs, qs = Xc[j - 1].copy(), A[i + j - 1].copy()
+        i += j
+        if j < k:  # point i did not close: the full solver, from the last solution
+            if fallback:
+                r = forward(model.mech, A[i], guess=xs, tol=tol)
+                nfall += 1
+                X[i], R[i], nit[i] = r.x, r.residual, r.nit
+                if r.success:
+                    xs, qs = np.array(r.x, dtype=float), A[i].copy()
+            else:
+                X[i], R[i], nit[i] = Xc[j], Rc[j], iters
+            i += 1
+    extra = {"compiled": compiled, "fallback": nfall, "chunks": calls, "chunk": chunk,
+             "iters": iters, "path": True}
+    return _finish(model, A, X, R, nit, tol, "compiled-track" if compiled else "track", t0,
+                   extra)
+
+
+def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback) -> BatchResult:
+    t0 = timer()
+    n, nx = A.shape[0], model.nx
+    g = None if guess is None or isinstance(guess, KinResult) else np.asarray(guess, dtype=float)
+    if g is not None and g.ndim == 2 and g.shape == (n, nx):
+        X0 = np.array(g, dtype=float)
+    else:
+        X0 = np.empty((n, nx))
+        x_one = None if guess is None else parse_guess(model, check_qa(model, A[0]), guess)
+        for i in range(n):
+            X0[i] = model.default_x(A[i]) if x_one is None else x_one
+    chunk = min(chunk, max(n, 1))
+    fmap = model.step.map(chunk, "thread", threads)
+    ev = FastFn(fmap)
+    X = X0.copy()
+    R = np.full(n, np.inf)
+    nit = np.zeros(n, dtype=int)
+    Qc = np.empty((chunk, model.na))
+    Xc = np.empty((chunk, nx))
+    Xn = np.empty((chunk, nx))
+    Rc = np.empty(chunk)
+    calls = 0
+    for s in range(0, n, chunk):
+        k = min(chunk, n - s)
+        Qc[:k] = A[s:s + k]
+        Qc[k:] = A[s + k - 1]
+        Xc[:k] = X[s:s + k]
+        Xc[k:] = X[s + k - 1]
+        done = np.zeros(chunk, dtype=bool)
+        done[k:] = True
+        for it in range(max_iter + 1):
+            ev.into([Qc, Xc], [Xn, Rc])
+            calls += 1
+            conv = ~done & np.isfinite(Rc) & (Rc <= tol)
+            R[s:s + k][conv[:k]] = Rc[:k][conv[:k]]
+            nit[s:s + k][conv[:k]] = it
+            # converged at Xc: keep the one further (polishing) step when it is finite
+            pol = conv & np.isfinite(Xn).all(axis=1)
+            Xc[pol] = Xn[pol]
+            done |= conv
+            if done.all() or it == max_iter:
+                break
+            upd = ~done & np.isfinite(Xn).all(axis=1)
+            Xc[upd] = Xn[upd]
+        ev.into([Qc, Xc], [Xn, Rc])  # the residuals at the returned (polished) rows
+        calls += 1
+        X[s:s + k] = Xc[:k]
+        R[s:s + k] = Rc[:k]
+        nit[s:s + k][~done[:k]] = max_iter
+    nfall = 0
+    if fallback:
+        for i in np.flatnonzero(~(np.isfinite(R) & (R <= tol))):
+            r = forward(model.mech, A[i], guess=X0[i], tol=tol)
+            nfall += 1
+            X[i], R[i], nit[i] = r.x, r.residual, nit[i] + r.nit
+    compiled = model.compiled
+    extra = {"compiled": compiled, "fallback": nfall, "chunks": calls, "chunk": chunk,
+             "threads": threads, "path": False}
+    return _finish(model, A, X, R, nit, tol, "compiled-newton" if compiled else "newton", t0,
+                   extra)
