@@ -6,7 +6,7 @@ models, returning result objects that say what happened.
 """
 
 from . import mechanisms, plot
-from .analysis import Jacobians, jacobians
+from .analysis import DofReport, Jacobians, SingularityReport, classify, dof, jacobians
 from .errors import MechanismError, OptkinError, ProblemFileError, SolverError
 from .mechanism import Leg, Mechanism
 from .model import get_model
@@ -17,6 +17,7 @@ from .solvers.batch import BatchResult, forward_batch
 __version__ = "0.1.0"
 
 __all__ = [
+    "DofReport",
     "Jacobians",
     "KinResult",
     "Leg",
@@ -24,10 +25,13 @@ __all__ = [
     "MechanismError",
     "OptkinError",
     "ProblemFileError",
+    "SingularityReport",
     "SolutionSet",
     "SolverError",
     "SolverStats",
     "__version__",
+    "classify",
+    "dof",
     "BatchResult",
     "forward",
     "forward_batch",

@@ -2,6 +2,8 @@
 singularity classification and maps (seed 000 7.8-7.11, Modern Robotics 7.2-7.3, seeds 003
 and 004)."""
 
+from .mobility import DofReport, dof
+from .singularity import SingularityReport, classify
 from .velocity import Jacobians, jacobians
 
-__all__ = ["Jacobians", "jacobians"]
+__all__ = ["DofReport", "Jacobians", "SingularityReport", "classify", "dof", "jacobians"]

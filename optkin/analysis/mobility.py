@@ -1,0 +1,328 @@
+"""Degrees of freedom: Grubler-Kutzbach count and rank-based mobility ([7.56]-[7.59]).
+
+:func:`dof` reports two numbers that should agree for ordinary mechanisms:
+
+* ``grubler`` - the Kutzbach-Grubler count of seed 003,
+  m = lambda n_mb - sum_k (lambda - k) j_k, written with the number of independent
+  kinematic loops n_ikl = j_tot - n_mb as m = sum_i f_i - sum_loops lambda_j (so that a
+  planar loop counts lambda = 3 and a spatial loop lambda = 6, [7.57]). It counts links and
+  joints and ignores the geometry.
+* ``mobility`` - N = min_q dim null(J(q)) [7.58] over random closed configurations, with
+  c = max_q rank J(q) [7.59] the number of independent constraints. J is the constraint
+  Jacobian over every joint (Khalil tables), or over every leg joint and the platform
+  coordinates (leg-described platforms).
+
+They disagree for overconstrained linkages (Bennett: Grubler -2, mobility 1) and when
+links spin idly (S-S rods): the report says so in ``message``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ..mechanism import Mechanism
+from ..model import get_model
+from ..model import khalil as kh
+from ._functions import analysis_functions
+
+__all__ = ["DofReport", "dof", "closed_configurations", "joint_inventory"]
+
+
+@dataclass
+class DofReport:
+    """Degrees of freedom of a mechanism (see :func:`dof`).
+
+    Attributes
+    ----------
+    grubler : int
+        The Kutzbach-Grubler count (seed 003).
+    mobility : int
+        min dim null(J) over the sampled closed configurations [7.58].
+    constraints : int
+        c = max rank J [7.59].
+    agree : bool
+        Whether ``grubler - idle == mobility``.
+    idle : int
+        Idle degrees of freedom the count includes (spin of S-S rods about their axis).
+    n_links, n_joints, n_loops : int
+        Movable bodies, joints (a joint with k freedoms counts once in ``joint_freedoms``),
+        independent loops n_ikl = j_tot - n_mb.
+    loop_lambda : tuple of int
+        lambda of each loop (3 planar, 6 spatial; from the rank of the loop's rows).
+    nullity : list of int
+        dim null(J) at each sampled configuration.
+    """
+
+    mech_name: str
+    grubler: int
+    mobility: int
+    constraints: int
+    agree: bool
+    message: str
+    success: bool = True
+    idle: int = 0
+    n_links: int = 0
+    n_joints: int = 0
+    n_loops: int = 0
+    joint_freedoms: dict[int, int] = field(default_factory=dict)
+    loop_lambda: tuple[int, ...] = ()
+    nullity: list[int] = field(default_factory=list)
+    intended: int = 0
+    samples: int = 0
+    residual: float = 0.0
+
+    def __repr__(self) -> str:
+        flag = "agree" if self.agree else "DISAGREE"
+        return (f"DofReport({self.mech_name!r}: grubler={self.grubler}, "
+                f"mobility={self.mobility}, {flag})")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "mech_name": self.mech_name, "grubler": int(self.grubler),
+            "mobility": int(self.mobility), "constraints": int(self.constraints),
+            "agree": bool(self.agree), "message": self.message, "success": bool(self.success),
+            "idle": int(self.idle), "n_links": int(self.n_links), "n_joints": int(self.n_joints),
+            "n_loops": int(self.n_loops),
+            "joint_freedoms": {str(k): int(v) for k, v in self.joint_freedoms.items()},
+            "loop_lambda": [int(v) for v in self.loop_lambda],
+            "nullity": [int(v) for v in self.nullity], "intended": int(self.intended),
+            "samples": int(self.samples), "residual": float(self.residual),
+        }
+
+
+# ----------------------------------------------------------------------------- counting
+#: leg type -> joint freedoms along the leg (base to platform), movable links, idle spins
+_LEG_JOINTS: dict[str, tuple[tuple[int, ...], int, int]] = {
+    "RPR": ((1, 1, 1), 2, 0),
+    "RRR": ((1, 1, 1), 2, 0),
+    "UPS": ((2, 1, 3), 2, 0),
+    "SPS": ((3, 1, 3), 2, 1),
+    "RUS": ((1, 2, 3), 2, 0),
+    "RSS": ((1, 3, 3), 2, 1),
+}
+
+
+def joint_inventory(mech: Mechanism) -> dict[str, Any]:
+    """Links, joints (with their freedoms) and loop subspace dimensions of ``mech``.
+
+    Khalil tables: one movable link per tree joint frame, one joint per joint variable (cut
+    joints included), lambda of each loop = generic rank of its six closure rows.
+    Platforms: the joints of each leg type (table ``_LEG_JOINTS``) plus the platform; legs of
+    a point platform meet in one multiple revolute (l - 1 joints, no platform body); the
+    legs of a translational (Delta) platform are R + a parallelogram of two S-S rods.
+    """
+    if mech.kind == "khalil":
+        table = mech.table
+        n_links = sum(1 for f in table.frames[: table.n] if f.is_joint)
+        freedoms = [1] * len(mech.joint_names)
+        lam = _loop_lambda(mech)
+        return {"n_links": n_links, "freedoms": freedoms, "lambda": lam,
+                "loops": len(freedoms) - n_links, "idle": 0}
+    space = 3 if mech.planar else 6
+    freedoms: list[int] = []
+    n_links = 0
+    idle = 0
+    nl = len(mech.legs)
+    if mech.platform == "planar_point":
+        for leg in mech.legs:
+            fr, links, _ = _LEG_JOINTS[leg.type]
+            freedoms += list(fr[:-1])
+            n_links += links
+        freedoms += [1] * (nl - 1)  # the multiple revolute where the legs meet
+    elif mech.platform == "spatial_translational" and all(
+            leg.type in ("RUS", "RSS") for leg in mech.legs):
+        for _ in mech.legs:
+            freedoms += [1, 3, 3, 3, 3]  # base R, two S-S rods of the parallelogram
+            n_links += 3  # arm + two rods
+            idle += 2
+        n_links += 1
+    else:
+        for leg in mech.legs:
+            fr, links, idl = _LEG_JOINTS[leg.type]
+            freedoms += list(fr)
+            n_links += links
+            idle += idl
+        n_links += 1
+    loops = len(freedoms) - n_links
+    return {"n_links": n_links, "freedoms": freedoms, "lambda": [space] * loops,
+            "loops": loops, "idle": idle}
+
+
+def _loop_lambda(mech: Mechanism, samples: int = 4, seed: int = 11) -> list[int]:
+    """Generic rank of each loop's six closure rows (3 planar/spherical, 6 spatial)."""
+    nq = len(mech.joint_names)
+    q = ca.SX.sym("q", nq)
+    rows, _ = kh.closure_rows(mech, kh.frames_0(mech, q))
+    f = ca.Function("all_rows_jac", [q], [ca.jacobian(rows, q)])
+    rng = np.random.default_rng(seed)
+    G = np.hstack([np.array(f(rng.uniform(-np.pi, np.pi, nq))) for _ in range(samples)])
+    out = []
+    for j in range(mech.table.loops):
+        g = G[6 * j: 6 * j + 6]
+        scale = max(1.0, float(np.abs(g).max()))
+        out.append(int(np.linalg.matrix_rank(g, tol=1e-9 * scale)))
+    return out
+
+
+# ----------------------------------------------------------------------------- sampling
+def closed_configurations(
+    mech: Mechanism, n: int = 5, seed: int = 0, tol: float = 1e-10, max_starts: int = 60
+) -> tuple[list[np.ndarray], float]:
+    """Random closed configurations by least squares over all joint variables.
+
+    Returns the configurations (Khalil: all joints; platforms: all joints then the platform
+    coordinates x) and the largest residual among them.
+    """
+    f = analysis_functions(mech)
+    model = get_model(mech)
+    rng = np.random.default_rng(seed)
+    L = model.length
+    nv = f.nvar
+
+    def fun(z):
+        return np.array(f.rows_q(z)[0]).ravel()
+
+    def jac(z):
+        return np.array(f.rows_q(z)[1])
+
+    prismatic = np.zeros(nv, bool)
+    nj = len(mech.joint_names)
+    prismatic[:nj] = ~np.array(mech.revolute)
+    out: list[np.ndarray] = []
+    worst = 0.0
+    for _ in range(max_starts):
+        if len(out) >= n:
+            break
+        z0 = rng.uniform(-np.pi, np.pi, nv)
+        z0[prismatic] = rng.uniform(0.5, 1.5, prismatic.sum()) * L
+        if mech.kind == "legs":
+            x0 = model.default_x(np.zeros(model.na) + L)
+            x0 = x0 + rng.normal(0, 0.05, x0.size) * model.x_scale
+            z0[nj:] = x0
+        z, r = _gauss_newton(fun, jac, z0)
+        if r <= tol:
+            out.append(z)
+            worst = max(worst, r)
+    return out, worst
+
+
+def _gauss_newton(fun, jac, z, max_iter: int = 100) -> tuple[np.ndarray, float]:
+    """Minimum-norm Gauss-Newton steps on |Phi(z)|^2 with backtracking."""
+    r = fun(z)
+    nr = float(r @ r)
+    for _ in range(max_iter):
+        if nr < 1e-26 or not np.isfinite(nr):
+            break
+        dz = np.linalg.lstsq(jac(z), -r, rcond=None)[0]
+        step = 1.0
+        nrm = float(np.linalg.norm(dz))
+        if nrm > 1.0:
+            dz = dz / nrm
+        while step > 1e-4:
+            zn = z + step * dz
+            rn = fun(zn)
+            nn = float(rn @ rn)
+            if nn < nr:
+                z, r, nr = zn, rn, nn
+                break
+            step *= 0.5
+        else:
+            break
+    return z, float(np.max(np.abs(r))) if r.size else 0.0
+
+
+def _scaled(mech: Mechanism, J: np.ndarray) -> np.ndarray:
+    """Rows of lengths divided and prismatic/position columns multiplied by the length
+    scale, so that the singular values are dimensionless."""
+    f = analysis_functions(mech)
+    model = get_model(mech)
+    L = model.length
+    nj = len(mech.joint_names)
+    cs = np.ones(J.shape[1])
+    cs[:nj][~np.array(mech.revolute)] = L
+    if mech.kind == "legs":
+        cs[nj:] = model.x_scale
+    rs = np.where(f.row_length, 1.0 / L, 1.0)
+    return rs[:, None] * J * cs[None, :]
+
+
+def rank_of(s: np.ndarray, rtol: float) -> int:
+    """Numerical rank from singular values ``s`` with a relative tolerance."""
+    if s.size == 0 or s[0] == 0:
+        return 0
+    return int(np.sum(s > rtol * s[0]))
+
+
+def dof(mech: Mechanism, samples: int = 5, seed: int = 0, rtol: float = 1e-8) -> DofReport:
+    """Degrees of freedom of ``mech``: Grubler's count and the rank-based mobility.
+
+    Parameters
+    ----------
+    mech : Mechanism
+    samples : int
+        Number of random closed configurations for [7.58]/[7.59].
+    seed : int
+        Seed of the random starts.
+    rtol : float
+        Relative singular-value threshold for the rank (of the scaled Jacobian).
+
+    Returns
+    -------
+    DofReport
+        ``grubler``, ``mobility``, ``constraints`` and whether they agree.
+
+    Examples
+    --------
+    >>> import optkin
+    >>> r = optkin.dof(optkin.mechanisms.four_bar(4, 4, 2, 2))
+    >>> (r.grubler, r.mobility, r.agree)
+    (1, 1, True)
+    """
+    inv = joint_inventory(mech)
+    freedoms = inv["freedoms"]
+    lam = inv["lambda"]
+    grub = int(sum(freedoms) - sum(lam))
+    hist: dict[int, int] = {}
+    for k in freedoms:
+        hist[k] = hist.get(k, 0) + 1
+    f = analysis_functions(mech)
+    confs, worst = closed_configurations(mech, n=samples, seed=seed)
+    nullity, ranks = [], []
+    for z in confs:
+        J = np.array(f.rows_q(z)[1])
+        s = np.linalg.svd(_scaled(mech, J), compute_uv=False)
+        r = rank_of(s, rtol)
+        ranks.append(r)
+        nullity.append(J.shape[1] - r)
+    ok = bool(confs)
+    mob = int(min(nullity)) if ok else -1
+    c = int(max(ranks)) if ok else -1
+    idle = int(inv["idle"])
+    agree = ok and grub - idle == mob
+    if not ok:
+        msg = ("no closed configuration found by least squares from random starts; the "
+               "mobility is unknown")
+    elif agree and idle:
+        msg = (f"Grubler counts {grub}, of which {idle} idle rotation(s) of S-S rods; "
+               f"mobility {mob} from the Jacobian rank")
+    elif agree:
+        msg = f"Grubler and the Jacobian rank agree: {mob} degree(s) of freedom"
+    else:
+        msg = (f"Grubler-Kutzbach counts {grub}"
+               + (f" ({grub - idle} without {idle} idle rotation(s))" if idle else "")
+               + f" but the constraint Jacobian has rank {c} and nullity {mob} at every sampled "
+               "closed configuration: the linkage is "
+               + ("overconstrained (special geometry, e.g. Bennett)" if mob > grub - idle
+                  else "underconstrained by the count")
+               + f"; it moves with {mob} degree(s) of freedom")
+    return DofReport(
+        mech_name=mech.name, grubler=grub, mobility=mob, constraints=c, agree=bool(agree),
+        message=msg, success=ok, idle=idle, n_links=int(inv["n_links"]),
+        n_joints=len(freedoms), n_loops=int(inv["loops"]), joint_freedoms=hist,
+        loop_lambda=tuple(int(v) for v in lam), nullity=nullity, intended=int(mech.dof),
+        samples=len(confs), residual=worst,
+    )

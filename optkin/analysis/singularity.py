@@ -1,0 +1,338 @@
+"""Singularity classification at one configuration: :func:`classify`.
+
+The verdicts, each with the smallest relevant singular value as its margin (of matrices
+made dimensionless: length rows divided and length columns multiplied by the mechanism's
+length scale, then divided by the largest singular value):
+
+===================== ======================================================================
+``serial``            J1 of [7.60] singular: some qdot_a != 0 gives no end-effector motion.
+                      Platforms: B (Chablat-Wenger) singular - a leg at a PSIK/MSIK pose.
+                      Khalil mechanisms: the task rows of J_a lose rank (or, with W_p
+                      singular, a null motion of [H; K_task] has active components).
+``parallel``          J2 of [7.60] singular: the end effector moves with the actuators
+                      locked. Platforms: A singular (PSFK/MSFK); Khalil mechanisms: W_p
+                      singular with a null motion that moves the end effector.
+``internal``          W_p of [7.49] singular (seed 000, 7.11): passive motion with
+                      qdot_a = 0 (for platforms W_p = dPhi/dx, so it coincides with
+                      ``parallel``).
+``configuration_space`` rank H < c, c the generic rank of the constraint Jacobian over all
+                      joints (Modern Robotics 7.3; bifurcation points of the four-bar).
+``actuator``          rank H_p < p (MR 7.3).
+``actuator_degenerate`` an actuator singularity where the locked mechanism still moves at
+                      second order: u^T d^2Phi/dx^2 [v, v] = 0 for the left/right null
+                      vectors u, v of W_p (MR's degenerate case); otherwise non-degenerate.
+``end_effector``      the end-effector task twist restricted to the tangent space null(H)
+                      loses rank (MR 7.3, independent of the actuated joints).
+===================== ======================================================================
+
+Aliases of the slides (seed 003) are reported in ``aliases``: PSFK and MSFK for parallel,
+PSIK and MSIK for serial (with the legs concerned), and the [7.60] case "both".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..mechanism import Mechanism
+from ..model import get_model
+from ._functions import analysis_functions
+from .mobility import dof
+from .velocity import Jacobians, jacobians, twist_rows
+
+__all__ = ["SingularityReport", "classify", "CLASSIFY_DEFAULTS", "TYPES"]
+
+TYPES = ("serial", "parallel", "internal", "configuration_space", "actuator",
+         "actuator_degenerate", "end_effector")
+
+#: Options of :func:`classify`.
+CLASSIFY_DEFAULTS: dict[str, Any] = {
+    "rtol": 1e-6,  # relative singular-value threshold of every first-order verdict
+    "second_order_tol": 1e-6,  # |u^T Phi''[v, v]| below this: degenerate
+}
+
+_GENERIC_RANK: dict[str, int] = {}
+_TASK_TO_TWIST = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
+
+
+@dataclass
+class SingularityReport:
+    """Which singularities hold at a configuration (see :func:`classify`).
+
+    Attributes
+    ----------
+    types : set of str
+        Drawn from :data:`TYPES`; empty at a regular configuration.
+    margins : dict
+        Type -> the smallest relative singular value behind the verdict (the second-order
+        coefficient for ``actuator_degenerate``; NaN when not evaluated).
+    aliases : dict
+        Slide names (seed 003) -> bool: PSFK, MSFK (= parallel), PSIK, MSIK (= serial), and
+        "both" ([7.60] iii).
+    legs_at_psik : tuple of int
+        Legs (1-based) whose B_ii vanishes (PSIK(k) of the slides); platforms only.
+    jacobians : Jacobians
+        The velocity model the verdicts come from.
+    """
+
+    types: set[str]
+    margins: dict[str, float]
+    aliases: dict[str, bool]
+    rtol: float
+    success: bool = True
+    message: str = ""
+    legs_at_psik: tuple[int, ...] = ()
+    null_motions: dict[str, np.ndarray] = field(default_factory=dict)
+    jacobians: Jacobians | None = None
+
+    @property
+    def singular(self) -> bool:
+        return bool(self.types)
+
+    @property
+    def names(self) -> set[str]:
+        """Every name that holds: the types and the slide aliases."""
+        return set(self.types) | {k for k, v in self.aliases.items() if v}
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.names
+
+    def __repr__(self) -> str:
+        t = ", ".join(sorted(self.types)) or "regular"
+        return f"SingularityReport({t})"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "types": sorted(self.types),
+            "margins": {k: (None if not np.isfinite(v) else float(v))
+                        for k, v in self.margins.items()},
+            "aliases": dict(self.aliases), "rtol": self.rtol, "success": self.success,
+            "message": self.message, "legs_at_psik": list(self.legs_at_psik),
+        }
+
+
+def _rel_min(M: np.ndarray, k: int | None = None) -> tuple[float, np.ndarray, np.ndarray]:
+    """(sigma_k / sigma_1, U, Vt) with sigma_k the k-th singular value (default the last)."""
+    if M.size == 0:
+        return float("inf"), np.zeros((M.shape[0], 0)), np.zeros((0, M.shape[1]))
+    U, s, Vt = np.linalg.svd(M)
+    n = min(M.shape) if k is None else k
+    if n <= 0:
+        return float("inf"), U, Vt
+    if s[0] == 0:
+        return 0.0, U, Vt
+    return float(s[n - 1] / s[0]), U, Vt
+
+
+def _generic_rank(mech: Mechanism) -> int:
+    c = _GENERIC_RANK.get(mech.key)
+    if c is None:
+        c = dof(mech, samples=3).constraints
+        _GENERIC_RANK[mech.key] = c
+    return c
+
+
+def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
+    """Every singularity type that holds at the configuration ``q``.
+
+    Parameters
+    ----------
+    mech : Mechanism
+    q : array or KinResult
+        All joint values (as ``KinResult.q``) or a solve result.
+    **options
+        ``rtol`` (default 1e-6): relative singular-value threshold; ``second_order_tol``
+        (default 1e-6): threshold of the degenerate-actuator test. See
+        :data:`CLASSIFY_DEFAULTS`.
+
+    Returns
+    -------
+    SingularityReport
+
+    Examples
+    --------
+    >>> import numpy as np, optkin
+    >>> m = optkin.mechanisms.five_bar(1, 1.5, 1.5, 1, 1)
+    >>> # P = (1, 2) is at distance L3 + L4 = 2 from B = (1, 0): leg 2 is stretched
+    >>> r = optkin.inverse(m, [1.0, 2.0])
+    >>> rep = optkin.classify(m, r[0])
+    >>> sorted(rep.types)
+    ['end_effector', 'serial']
+    """
+    from ..solvers.common import merge_options
+
+    opts = merge_options(CLASSIFY_DEFAULTS, options, "classify")
+    rtol = float(opts["rtol"])
+    tol2 = float(opts["second_order_tol"])
+    jac = jacobians(mech, q)
+    model = get_model(mech)
+    f = analysis_functions(mech)
+    L = model.length
+    act = np.array(mech.actuated)
+    types: set[str] = set()
+    margins: dict[str, float] = {t: float("nan") for t in TYPES}
+    nulls: dict[str, np.ndarray] = {}
+    legs_psik: tuple[int, ...] = ()
+
+    # scaling of the model-level matrices
+    qa_scale = np.where(np.array(mech.revolute)[act], 1.0, L)
+    if mech.kind == "khalil":
+        x_rows_len = np.array([n.split(".")[-1].startswith("p") for n in model.row_names])
+    else:
+        x_rows_len = np.array([n.startswith("leg:") for n in model.row_names])
+    rs = np.where(x_rows_len, 1.0 / L, 1.0)
+    _, Wp_m, Wa_m = (np.array(v) for v in model.jac(jac.qa, jac.x))
+    Wp_s = rs[:, None] * Wp_m * model.x_scale[None, :]
+
+    # joint-level H and K (scaled)
+    nj = len(mech.joint_names)
+    var_scale = np.ones(f.nvar)
+    var_scale[:nj][~np.array(mech.revolute)] = L
+    if mech.kind == "legs":
+        var_scale[nj:] = model.x_scale
+    Hs = np.where(f.row_length, 1.0 / L, 1.0)[:, None] * jac.H * var_scale[None, :]
+    tw = twist_rows(mech)
+    if mech.kind == "khalil":
+        task_rows = [_TASK_TO_TWIST[t] for t in mech.task]
+    else:
+        task_rows = tw
+    krs = np.array([1.0 / L if i < 3 else 1.0 for i in task_rows])
+    Ks = krs[:, None] * jac.K[task_rows] * var_scale[None, :]
+    pas = np.ones(f.nvar, bool)
+    pas[np.flatnonzero(act)] = False
+
+    # internal: W_p of [7.49] (model level, all unknowns)
+    m_int, U_int, Vt_int = _rel_min(Wp_s)
+    margins["internal"] = m_int
+    internal = m_int < rtol
+    if internal:
+        types.add("internal")
+        nulls["internal"] = Vt_int[-1] * model.x_scale
+
+    # parallel
+    if mech.kind == "legs":
+        E_scale = np.array([L if i < 3 else 1.0 for i in tw])
+        legrows = [i for i, n in enumerate(model.row_names) if n.startswith("leg:")]
+        A_s = (jac.A / L) * E_scale[None, :]
+        m_par, _, Vt_par = _rel_min(A_s)
+        margins["parallel"] = m_par
+        if m_par < rtol:
+            types.add("parallel")
+            nulls["parallel"] = Vt_par[-1] * E_scale
+        # serial: each leg's B_ii against its whole row [A_i, B_i]
+        B_s = (jac.B / L) * qa_scale[None, :]
+        leg_m = []
+        for i in range(B_s.shape[0]):
+            row = np.concatenate([A_s[i], B_s[i]])
+            nr = float(np.linalg.norm(row))
+            leg_m.append(float(np.linalg.norm(B_s[i]) / nr) if nr > 0 else 0.0)
+        margins["serial"] = float(min(leg_m))
+        legs_psik = tuple(i + 1 for i, v in enumerate(leg_m) if v < rtol)
+        if legs_psik:
+            types.add("serial")
+        del legrows
+    else:
+        margins["parallel"] = m_int
+        if internal:
+            sv = np.linalg.svd(Wp_s, compute_uv=False)
+            k = int(np.sum(sv < rtol * sv[0])) + (Wp_s.shape[1] - sv.size)
+            V = Vt_int[-max(k, 1):]
+            Kx = Ks[:, pas]
+            move = float(np.linalg.norm(Kx @ V.T, 2)) / max(float(np.linalg.norm(Ks, 2)), 1e-300)
+            if move > np.sqrt(rtol):
+                types.add("parallel")
+        # serial: J1 of [7.60]
+        if not internal:
+            Jt = krs[:, None] * jac.J_a[task_rows] * qa_scale[None, :]
+            margins["serial"], _, Vt_s = _rel_min(Jt)
+            if margins["serial"] < rtol:
+                types.add("serial")
+                nulls["serial"] = Vt_s[-1] * qa_scale
+        else:
+            M = np.vstack([Hs, Ks])
+            s = np.linalg.svd(M, compute_uv=True)
+            Vt = s[2]
+            sv = s[1]
+            rk = int(np.sum(sv > rtol * sv[0]))
+            Z = Vt[rk:]
+            za = Z[:, ~pas] if Z.size else np.zeros((0, int((~pas).sum())))
+            val = float(np.linalg.norm(za, 2)) if za.size else 0.0
+            margins["serial"] = 1.0 - val
+            if val > 1e-3:
+                types.add("serial")
+
+    # Modern Robotics: configuration space, actuator, end effector
+    c = _generic_rank(mech)
+    m_cs, _, _ = _rel_min(Hs, c)
+    margins["configuration_space"] = m_cs
+    if m_cs < rtol:
+        types.add("configuration_space")
+    Hp_s = Hs[:, pas]
+    r = min(int(pas.sum()), c)
+    m_act, _, _ = _rel_min(Hp_s, r)
+    margins["actuator"] = m_act
+    actuator = m_act < rtol
+    if actuator:
+        types.add("actuator")
+        deg, q2 = _degenerate(jac, model, f, Wp_s, rs, rtol, tol2)
+        margins["actuator_degenerate"] = q2
+        if deg:
+            types.add("actuator_degenerate")
+    # end effector: task twist on the tangent space (generic dimension nvar - c)
+    _, _, Vt_h = np.linalg.svd(Hs)
+    T = Vt_h[c:].T
+    m_ee, _, Vt_ee = _rel_min(Ks @ T)
+    margins["end_effector"] = m_ee
+    if m_ee < rtol:
+        types.add("end_effector")
+
+    par = "parallel" in types
+    ser = "serial" in types
+    aliases = {"PSFK": par, "MSFK": par, "PSIK": ser, "MSIK": ser, "both": par and ser,
+               "type_1": ser, "type_2": par}
+    msg = jac.message
+    return SingularityReport(types=types, margins=margins, aliases=aliases, rtol=rtol,
+                             success=jac.success, message=msg, legs_at_psik=legs_psik,
+                             null_motions=nulls, jacobians=jac)
+
+
+def _degenerate(jac: Jacobians, model: Any, f: Any, Wp_s: np.ndarray, rs: np.ndarray,
+                rtol: float, tol2: float) -> tuple[bool, float]:
+    """Second-order test at an actuator singularity with the actuators locked.
+
+    With u_j the left and V the right null vectors of W_p (scaled), the locked mechanism can
+    follow x(s) = x + s v + s^2/2 w only if u_j^T Phi''[v, v] = 0 for every j; a real
+    v != 0 in span(V) solving these quadratics means a degenerate singularity.
+    """
+    U, s, Vt = np.linalg.svd(Wp_s)
+    if s.size == 0:
+        return False, float("nan")
+    k_r = int(np.sum(s < rtol * s[0])) + (Wp_s.shape[1] - s.size)
+    k_l = int(np.sum(s < rtol * s[0])) + (Wp_s.shape[0] - s.size)
+    if k_r == 0 or k_l == 0:
+        return False, float("nan")
+    V = Vt[-k_r:].T  # scaled x directions
+    Ul = U[:, -k_l:]
+    Ms = []
+    for j in range(k_l):
+        u = rs * Ul[:, j]  # weights on the unscaled rows
+        Hx = np.array(f.hess_x(jac.qa, jac.x, u))
+        Dv = model.x_scale[:, None] * V
+        Ms.append(Dv.T @ Hx @ Dv)
+    if k_r == 1:
+        q2 = float(max(abs(M[0, 0]) for M in Ms))
+        return q2 < tol2, q2
+    # several null directions: minimise sum_j (v^T M_j v)^2 on the unit sphere
+    from scipy.optimize import minimize
+
+    def obj(v):
+        v = v / np.linalg.norm(v)
+        return sum(float(v @ M @ v) ** 2 for M in Ms)
+
+    rng = np.random.default_rng(0)
+    best = min(minimize(obj, rng.normal(size=k_r), method="Nelder-Mead",
+                        options={"xatol": 1e-12, "fatol": 1e-20}).fun for _ in range(8))
+    q2 = float(np.sqrt(best))
+    return q2 < tol2, q2
