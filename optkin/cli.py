@@ -88,7 +88,11 @@ def _progress_factory(enabled: bool):
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from optkin.problems.runner import run_paths
+    from optkin.problems.runner import find_problem_files, run_paths
+
+    if not find_problem_files(args.paths):
+        _err(f"optkin: no problem files (*.toml) under {' '.join(args.paths)}")
+        return EXIT_INVALID
 
     tty = sys.stdout.isatty()
     t0 = time.perf_counter()

@@ -1,0 +1,332 @@
+"""The ``optkin`` command: run / validate / show, exit codes, resume, kill -9, jobs, Dask."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from optkin.cli import main
+from optkin.problems.runner import is_complete
+from optkin.problems.schema import input_hash
+
+ROOT = Path(__file__).resolve().parents[1]
+PROBLEMS = ROOT / "problems"
+#: quick bundled problems (each well under a second)
+SMALL = ["four_bar.toml", "five_bar.toml", "rpr3.toml", "rpr3_legs.toml", "stewart_gough.toml"]
+
+
+def optkin(*args: str, timeout: float = 180) -> subprocess.CompletedProcess:
+    """``python -m optkin ARGS`` in a subprocess (stdout is a pipe, not a TTY)."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.run([sys.executable, "-m", "optkin", *args], capture_output=True,
+                          text=True, timeout=timeout, env=env, cwd=ROOT)
+
+
+@pytest.fixture
+def small(tmp_path: Path) -> Path:
+    d = tmp_path / "problems"
+    d.mkdir()
+    for name in SMALL:
+        shutil.copy(PROBLEMS / name, d / name)
+    (d / "README.md").write_text("not a problem\n")
+    return d
+
+
+def _results(out: Path) -> dict[str, dict[str, Any]]:
+    return {p.name: json.loads(p.read_text()) for p in sorted(out.glob("*.json"))}
+
+
+def _numbers(node: Any, prefix: str = "") -> dict[str, Any]:
+    """The numeric/boolean/string leaves of a result, minus timings and host details."""
+    skip = {"time", "elapsed", "started", "stats", "worker", "model_build_time", "solve_time",
+            "setup_time", "t_wall_total", "file", "notes"}
+    out: dict[str, Any] = {}
+    if isinstance(node, dict):
+        for k, v in node.items():
+            if k not in skip:
+                out.update(_numbers(v, f"{prefix}.{k}"))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            out.update(_numbers(v, f"{prefix}[{i}]"))
+    else:
+        out[prefix] = node
+    return out
+
+
+def assert_same_results(a: dict[str, dict], b: dict[str, dict]) -> None:
+    assert a.keys() == b.keys()
+    for name in a:
+        na, nb = _numbers(a[name]), _numbers(b[name])
+        assert na.keys() == nb.keys(), name
+        for k in na:
+            x, y = na[k], nb[k]
+            if isinstance(x, float) and isinstance(y, float):
+                assert math.isclose(x, y, rel_tol=1e-9, abs_tol=1e-9), (name, k, x, y)
+            else:
+                assert x == y, (name, k, x, y)
+
+
+# ---------------------------------------------------------------------------
+# the README's first command
+# ---------------------------------------------------------------------------
+
+
+def test_bundled_problems_pass_then_resume(tmp_path: Path) -> None:
+    out = tmp_path / "results"
+    t0 = time.perf_counter()
+    r = optkin("run", "problems/", "--out", str(out))
+    first = time.perf_counter() - t0
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr
+    n = len([p for p in PROBLEMS.glob("*.toml")])
+    res = _results(out)
+    assert len(res) == n
+    for name, d in res.items():
+        assert d["complete"] is True
+        for t in d["tasks"]:
+            assert t["status"] == "ok" and t["passed"], (name, t["index"], t["message"])
+            assert t["expected"]["checks"], (name, t["index"])
+    pngs = list(out.glob("*.png"))
+    if pngs:  # drawing is optional (optkin.plot); when present every task has a picture
+        assert all(p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in pngs)
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert len(rows) == sum(len(d["tasks"]) for d in res.values())
+    assert {r_["passed"] for r_ in rows} == {"True"}
+    assert set(rows[0]) == {"problem", "task", "kind", "name", "status", "passed", "time", "message"}
+    # the same run again does no work
+    mtimes = {p: p.stat().st_mtime_ns for p in out.iterdir()}
+    t0 = time.perf_counter()
+    r2 = optkin("run", "problems/", "--out", str(out))
+    again = time.perf_counter() - t0
+    assert r2.returncode == 0, r2.stdout + r2.stderr
+    assert f"0 run, {n} skipped" in r2.stdout
+    for p, m in mtimes.items():
+        if p.name != "summary.csv":
+            assert p.stat().st_mtime_ns == m, p
+    assert again < first
+
+
+def test_force_redoes_and_changed_input_reruns(small: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    assert optkin("run", str(small), "--out", str(out), "--no-pictures").returncode == 0
+    stamp = {p.name: json.loads(p.read_text())["started"] for p in out.glob("*.json")}
+    pids = {p.name: json.loads(p.read_text())["worker"]["pid"] for p in out.glob("*.json")}
+    # an edited file (even a comment) has a new hash: only it reruns
+    f = small / "rpr3.toml"
+    f.write_text(f.read_text() + "\n# edited\n")
+    r = optkin("run", str(small), "--out", str(out), "--no-pictures")
+    assert r.returncode == 0
+    assert f"1 run, {len(SMALL) - 1} skipped" in r.stdout
+    after = {p.name: json.loads(p.read_text())["worker"]["pid"] for p in out.glob("*.json")}
+    assert [n for n in after if after[n] != pids[n]] == ["rpr3.json"]
+    # --force reruns everything
+    r = optkin("run", str(small), "--out", str(out), "--no-pictures", "--force")
+    assert r.returncode == 0
+    assert f"{len(SMALL)} run, 0 skipped" in r.stdout
+    forced = {p.name: json.loads(p.read_text()) for p in out.glob("*.json")}
+    assert all(forced[n]["worker"]["pid"] != pids[n] for n in forced)
+    assert set(forced) == set(stamp)
+
+
+def test_input_hash_includes_the_optkin_version(monkeypatch) -> None:
+    import optkin as ok
+
+    h1 = input_hash(b"schema_version = 1\n")
+    monkeypatch.setattr(ok, "__version__", "999.0")
+    assert input_hash(b"schema_version = 1\n") != h1
+
+
+def test_result_json_echoes_inputs_status_numbers_timings(small: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    assert main(["run", str(small / "five_bar.toml"), "--out", str(out), "--no-pictures"]) == 0
+    d = json.loads((out / "five_bar.json").read_text())
+    assert d["input"]["mechanism"]["args"]["L0"] == 9.0
+    assert d["mechanism"]["kind"] == "legs"
+    assert d["input_hash"] == input_hash((small / "five_bar.toml").read_bytes())
+    assert is_complete(out / "five_bar.json", d["input_hash"]) is not None
+    inv = d["tasks"][0]
+    assert inv["kind"] == "inverse" and inv["status"] == "ok" and inv["passed"]
+    assert inv["output"]["count"] == 4 and inv["time"] > 0
+    assert "stats" in inv["output"]["solutions"][0]
+    assert inv["expected"]["source"]
+    fwd = d["tasks"][1]
+    assert fwd["output"]["success"] is True and "stats" in fwd["output"]
+
+
+# ---------------------------------------------------------------------------
+# exit codes and messages
+# ---------------------------------------------------------------------------
+
+
+def test_missed_expected_gives_exit_1(small: Path, tmp_path: Path, capsys) -> None:
+    f = small / "four_bar.toml"
+    f.write_text(f.read_text().replace("count = 2", "count = 3"))
+    code = main(["run", str(small), "--out", str(tmp_path / "o"), "--no-pictures"])
+    assert code == 1
+    out = capsys.readouterr().out
+    assert "four_bar.toml: task[1] (inverse, rocker at 2 rad): MISSED EXPECTED: expected count = 3, got 2" in out
+    rows = list(csv.DictReader((tmp_path / "o" / "summary.csv").open()))
+    bad = [r for r in rows if r["passed"] == "False"]
+    assert [(r["problem"], r["task"]) for r in bad] == [("four_bar.toml", "1")]
+
+
+def test_invalid_file_in_a_run_gives_exit_2_and_others_still_run(small: Path, tmp_path: Path) -> None:
+    (small / "zz_broken.toml").write_text(
+        "schema_version = 1\n[mechanism]\ntype = 'library'\nname = 'five_bar'\n"
+        "args = {L0 = 9.0, L1 = 8.0, L2 = 5.0, L3 = 5.0, L4 = 8.0}\n"
+        "[[task]]\nkind = 'singular_curves'\n[[task]]\nkind = 'forward'\nqa = [1, 2]\n"
+        "[[task]]\nkind = 'singular_curves'\ngrid = -3\n"
+    )
+    out = tmp_path / "o"
+    r = optkin("run", str(small), "--out", str(out), "--no-pictures")
+    assert r.returncode == 2
+    assert "zz_broken.toml: task[2].grid: expected a positive integer, got -3" in r.stderr
+    assert "Traceback" not in r.stderr
+    assert len(list(out.glob("*.json"))) == len(SMALL)
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert any(r_["problem"] == "zz_broken.toml" and r_["status"] == "invalid" for r_ in rows)
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["run", "does/not/exist"], "does/not/exist: (file): no such file or directory"),
+    (["validate", "nowhere.toml"], "nowhere.toml: (file): no such file or directory"),
+    (["run", "--jobs", "0", "problems"], "expected a positive integer, got 0"),
+    (["frobnicate"], "invalid choice"),
+    (["show", "nowhere.toml"], "nowhere.toml: (file): cannot read"),
+])
+def test_user_errors_exit_2_without_traceback(argv, needle, capsys) -> None:
+    try:
+        code = main(argv)
+    except SystemExit as e:  # argparse usage errors
+        code = e.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert needle in err
+    assert "Traceback" not in err
+
+
+def test_empty_directory_exits_2(tmp_path: Path, capsys) -> None:
+    assert main(["run", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert "no problem files" in capsys.readouterr().err
+
+
+def test_validate_bundled_problems(capsys) -> None:
+    assert main(["validate", str(PROBLEMS)]) == 0
+    out = capsys.readouterr().out
+    assert out.count(": ok (") == len(list(PROBLEMS.glob("*.toml")))
+
+
+def test_python_m_optkin_and_quiet_progress_when_not_a_tty(small: Path, tmp_path: Path) -> None:
+    r = optkin("--version")
+    assert r.returncode == 0 and r.stdout.startswith("optkin ")
+    r = optkin("run", str(small / "rpr3.toml"), "--out", str(tmp_path / "o"), "--no-pictures")
+    assert r.returncode == 0
+    assert "%|" not in r.stderr and "problem/s" not in r.stderr  # no tqdm bar in a pipe
+
+
+def test_show_draws_a_png(tmp_path: Path) -> None:
+    pytest.importorskip("optkin.plot")
+    png = tmp_path / "five.png"
+    assert main(["show", str(PROBLEMS / "five_bar.toml"), "--out", str(png)]) == 0
+    assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+# ---------------------------------------------------------------------------
+# safe with data: kill -9 mid-run, then resume
+# ---------------------------------------------------------------------------
+
+
+def test_sigkill_mid_run_leaves_complete_files_and_rerun_finishes(tmp_path: Path) -> None:
+    src = tmp_path / "many"
+    src.mkdir()
+    names = []
+    for i in range(14):
+        name = f"p{i:02d}_{SMALL[i % 3]}"
+        text = (PROBLEMS / SMALL[i % 3]).read_text() + f"\n# copy {i}\n"
+        (src / name).write_text(text)
+        names.append(Path(name).stem + ".json")
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "optkin", "run", str(src), "--out", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=ROOT)
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline:
+            if out.is_dir() and len(list(out.glob("*.json"))) >= 2:
+                break
+            assert proc.poll() is None, "the run ended before it could be killed"
+            time.sleep(0.005)
+        assert proc.poll() is None, "the run ended before it could be killed"
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == -signal.SIGKILL
+    left = sorted(out.glob("*.json"))
+    assert 2 <= len(left) < len(names), "kill the run mid-way"
+    for p in left:  # every result file is complete, valid JSON
+        d = json.loads(p.read_text())
+        assert d["complete"] is True and d["tasks"]
+    for p in out.iterdir():  # anything else is a hidden temp file or a finished picture
+        assert p.suffix in (".json", ".png", ".tmp"), p
+        if p.suffix == ".tmp":
+            assert p.name.startswith(".")
+    done_before = {p.name for p in left}
+    r = optkin("run", str(src), "--out", str(out))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert f"{len(names) - len(done_before)} run, {len(done_before)} skipped" in r.stdout
+    assert sorted(p.name for p in out.glob("*.json")) == sorted(names)
+    assert not list(out.glob(".*.tmp"))
+    for p in out.glob("*.json"):
+        assert json.loads(p.read_text())["complete"] is True
+
+
+# ---------------------------------------------------------------------------
+# scale out: process pool and Dask
+# ---------------------------------------------------------------------------
+
+
+def test_jobs_2_gives_the_same_results_as_jobs_1(small: Path, tmp_path: Path) -> None:
+    r1 = optkin("run", str(small), "--out", str(tmp_path / "j1"), "--no-pictures", "--jobs", "1")
+    r2 = optkin("run", str(small), "--out", str(tmp_path / "j2"), "--no-pictures", "--jobs", "2")
+    assert r1.returncode == r2.returncode == 0, r2.stdout + r2.stderr
+    a, b = _results(tmp_path / "j1"), _results(tmp_path / "j2")
+    assert_same_results(a, b)
+    assert len({d["worker"]["pid"] for d in b.values()}) == 2  # really two processes
+    s1 = [(r["problem"], r["task"], r["status"], r["passed"])
+          for r in csv.DictReader((tmp_path / "j1" / "summary.csv").open())]
+    s2 = [(r["problem"], r["task"], r["status"], r["passed"])
+          for r in csv.DictReader((tmp_path / "j2" / "summary.csv").open())]
+    assert s1 == s2
+
+
+def test_dask_local_cluster_gives_the_same_results(small: Path, tmp_path: Path) -> None:
+    distributed = pytest.importorskip("distributed")
+    assert main(["run", str(small), "--out", str(tmp_path / "serial"), "--no-pictures"]) == 0
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster:
+        code = main(["run", str(small), "--out", str(tmp_path / "dask"), "--no-pictures",
+                     "--scheduler", cluster.scheduler_address])
+    assert code == 0
+    assert_same_results(_results(tmp_path / "serial"), _results(tmp_path / "dask"))
+
+
+@pytest.mark.slow  # waits for the connection timeout
+def test_dask_unreachable_scheduler_is_a_user_error(small: Path, tmp_path: Path, capsys) -> None:
+    pytest.importorskip("distributed")
+    code = main(["run", str(small / "rpr3.toml"), "--out", str(tmp_path / "o"),
+                 "--scheduler", "tcp://127.0.0.1:9"])
+    assert code == 2
+    assert "--scheduler: cannot connect" in capsys.readouterr().err
