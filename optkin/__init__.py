@@ -5,7 +5,7 @@ optkin compiles it once into CasADi Functions and solves its direct and inverse 
 models, returning result objects that say what happened.
 """
 
-from . import mechanisms, plot
+from . import mechanisms, plot, statics
 from .analysis import DofReport, Jacobians, SingularityReport, classify, dof, jacobians
 from .errors import MechanismError, OptkinError, ProblemFileError, SolverError
 from .mechanism import Leg, Mechanism
@@ -40,4 +40,5 @@ __all__ = [
     "jacobians",
     "mechanisms",
     "plot",
+    "statics",
 ]

@@ -6,7 +6,7 @@ messages name the offending item and say how to fix it.
 
 from __future__ import annotations
 
-__all__ = ["OptkinError", "MechanismError", "ProblemFileError", "SolverError"]
+__all__ = ["OptkinError", "MechanismError", "ProblemFileError", "SolverError", "StaticsError"]
 
 
 class OptkinError(Exception):
@@ -23,3 +23,7 @@ class ProblemFileError(OptkinError, ValueError):
 
 class SolverError(OptkinError, RuntimeError):
     """An internal solver failure that cannot be expressed as an unsuccessful result."""
+
+
+class StaticsError(OptkinError, ValueError):
+    """Malformed input of a statics analysis (limits, wrenches, directions)."""

@@ -1,0 +1,340 @@
+"""The static model of a closed chain at one configuration (numpy, from the CasADi model).
+
+Derivation and sign convention
+------------------------------
+Every mechanism is written at a configuration as one linear velocity constraint
+
+    A t + B qa_dot + P qp_dot = 0                                               (1)
+
+between the end-effector twist ``t``, the actuated joint rates ``qa_dot`` and the rates of
+the remaining unknowns ``qp_dot`` (passive and cut joints):
+
+* leg-described platforms: the closure f_i(x, q_a,i) = |P_i(x) - C_i(q_a,i)| - l_i = 0
+  differentiates to Chablat and Wenger's A t + B qa_dot = 0 (seed 004), with A = W_p written
+  in twist coordinates and B = W_a diagonal; P is empty (the passive leg joints were
+  eliminated leg by leg). Planar platforms: x = (x, y, phi) so t = (vx, vy, wz) = x_dot.
+  Spatial platforms: x = (p, quaternion), and the quaternion rate of a base-frame angular
+  velocity w is quat_dot = 1/2 (0, w) * quat, so A = W_p [I 0; 0 1/2 E(quat)] (the row of
+  the quaternion norm vanishes on these motions and is dropped).
+* Khalil tables (seed 000, 7.5-7.7): the task rows t - J_a qa_dot - J_x x_dot = 0 (J the
+  twist Jacobian of the end-effector frame) stacked over the closure W_a qa_dot + W_p x_dot
+  = 0 [7.49], i.e. A = [I; 0], B = [-J_a; W_a], P = [-J_x; W_p].
+
+Let ``F`` be the wrench the end effector APPLIES TO THE ENVIRONMENT (Modern Robotics 5.2 and
+7.2: "the wrench applied by the end-effector"), written in the base frame with moments
+about the end-effector point (planar: (fx, fy, mz); spatial: (fx, fy, fz, mx, my, mz)), and
+``tau`` the actuator forces/torques (a positive leg force extends the leg). With massless
+links and frictionless passive joints, the principle of virtual work says that the power
+the actuators put in is the power the end effector delivers, for every motion allowed by
+(1) with the passive joints doing no work:
+
+    tau . qa_dot = F . t     for all (t, qa_dot, qp_dot) with A t + B qa_dot + P qp_dot = 0.
+
+So (F, -tau, 0) is orthogonal to the kernel of [A B P], i.e. lies in the range of its
+transpose: there are multipliers lambda (one per constraint row: the leg forces, the
+constraint forces of the loops) with
+
+    F = A^T lambda,    tau = -B^T lambda,    P^T lambda = 0.                     (2)
+
+For an n-RPR platform B = -I, so tau = lambda and F = sum_i tau_i [u_i; r_i x u_i] with u_i
+the unit vector from the base joint to the platform joint and r_i the platform joint
+relative to the end-effector point: the familiar "F = J^-T tau". When B is invertible (no
+serial singularity) and P = 0, F = G tau with G = -A^T B^-T = J_inv^T, where qa_dot =
+J_inv t is the inverse velocity model, and for a non-redundant, non-singular mechanism
+tau = J^T F with t = J qa_dot (MR 7.2.2). The LOAD the mechanism resists (gravity, a
+contact force acting on the platform) is W_ext = -F: with symmetric actuator limits the
+sets of achievable F and of resisted W_ext coincide; with asymmetric limits ``(lo, hi)``
+(e.g. cables) the wrench to pass is F = -W_ext.
+
+Two kinds of singular configurations show up in (2):
+
+* parallel (type 2): a twist t0 != 0 with A t0 + P qp_dot = 0 for some qp_dot (the platform
+  moves with the actuators locked). Then t0 . F = t0 . A^T lambda = -(P qp_dot) . lambda
+  = 0 for every achievable F: wrenches doing work on t0 are NOT resisted by any actuator
+  force. :attr:`StaticModel.unresisted` holds an orthonormal basis of these twists.
+* serial (type 1): multipliers lambda with B^T lambda = 0 and P^T lambda = 0 but
+  A^T lambda != 0: the structure carries the wrench A^T lambda with no actuator force, and
+  the capability along it is unbounded. :attr:`StaticModel.free_wrenches` holds them.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ..errors import MechanismError
+from ..mechanism import Mechanism
+from ..model import Model, get_model
+from ..results import KinResult
+
+__all__ = ["StaticModel", "static_model", "wrench_names"]
+
+#: default relative tolerance on singular values for the singularity tests
+SING_TOL = 1e-9
+
+_KH_CACHE: dict[str, ca.Function] = {}
+_KH_LOCK = threading.Lock()
+
+_TASK_TO_WRENCH = {"x": "fx", "y": "fy", "z": "fz", "rx": "mx", "ry": "my", "rz": "mz"}
+_TASK_TO_TWIST = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
+
+
+def wrench_names(mech: Mechanism) -> tuple[str, ...]:
+    """Names of the task wrench components of ``mech`` (order of ``F``)."""
+    if mech.kind == "khalil":
+        return tuple(_TASK_TO_WRENCH[c] for c in mech.task)
+    return {
+        "planar": ("fx", "fy", "mz"),
+        "planar_point": ("fx", "fy"),
+        "spatial": ("fx", "fy", "fz", "mx", "my", "mz"),
+        "spatial_translational": ("fx", "fy", "fz"),
+    }[mech.platform]
+
+
+@dataclass
+class StaticModel:
+    """The static model (2) at one configuration: F = A^T lambda, tau = -B^T lambda, P^T lambda = 0.
+
+    Attributes
+    ----------
+    A, B, P : arrays (r, m), (r, na), (r, np)
+        The velocity constraint (1) A t + B qa_dot + P qp_dot = 0 in twist coordinates.
+    G : array (m, na) or None
+        F = G tau (= J_inv^T) when B restricted to P^T lambda = 0 is invertible (no serial
+        singularity); None otherwise.
+    J : array (m, na) or None
+        The forward velocity Jacobian t = J qa_dot (tau = J^T F) of a non-redundant,
+        non-singular mechanism; None otherwise.
+    unresisted : array (m, k)
+        Orthonormal twists the platform can follow with the actuators locked (parallel
+        singularity when k > 0); a wrench with a component along them cannot be resisted.
+    free_wrenches : array (m, k)
+        Orthonormal wrenches carried without actuator force (serial singularity when k > 0).
+    singularity : str
+        ``"none"``, ``"parallel"``, ``"serial"`` or ``"parallel+serial"``.
+    cond : float
+        Condition number of the part of the constraint that fixes the platform ([A P]);
+        large near a parallel singularity.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    P: np.ndarray
+    wrench_names: tuple[str, ...]
+    actuator_names: tuple[str, ...]
+    G: np.ndarray | None
+    J: np.ndarray | None
+    unresisted: np.ndarray
+    free_wrenches: np.ndarray
+    singularity: str
+    cond: float
+    sing_tol: float = SING_TOL
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def m(self) -> int:
+        """Dimension of the wrench (task) space."""
+        return self.A.shape[1]
+
+    @property
+    def na(self) -> int:
+        """Number of actuators."""
+        return self.B.shape[1]
+
+    def wrench(self, tau: Any) -> np.ndarray:
+        """The wrench F = G tau applied by the end effector for actuator forces ``tau``.
+
+        Raises :class:`~optkin.errors.StaticsError` at a serial singularity (G undefined).
+        """
+        from ..errors import StaticsError
+
+        t = np.asarray(tau, dtype=float).ravel()
+        if t.shape != (self.na,):
+            raise StaticsError(
+                f"tau: expected {self.na} actuator forces {list(self.actuator_names)}, got "
+                f"shape {np.shape(tau)}"
+            )
+        if self.G is None:
+            raise StaticsError(
+                "wrench: the static map F = G tau is undefined at this serial singularity "
+                "(some actuator carries no load); use the multipliers of the static model"
+            )
+        return self.G @ t
+
+    def to_dict(self) -> dict[str, Any]:
+        def arr(a):
+            return None if a is None else np.asarray(a).tolist()
+
+        return {
+            "A": arr(self.A), "B": arr(self.B), "P": arr(self.P), "G": arr(self.G),
+            "J": arr(self.J), "wrench_names": list(self.wrench_names),
+            "actuator_names": list(self.actuator_names),
+            "unresisted": arr(self.unresisted), "free_wrenches": arr(self.free_wrenches),
+            "singularity": self.singularity,
+            "cond": self.cond if np.isfinite(self.cond) else None,
+        }
+
+
+# --------------------------------------------------------------------------------------
+
+
+def _config(model: Model, q: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(q_a, x) from a KinResult or a full joint vector."""
+    mech = model.mech
+    if isinstance(q, KinResult):
+        return np.asarray(q.qa, dtype=float), np.asarray(q.x, dtype=float)
+    try:
+        qq = np.asarray(q, dtype=float)
+    except (TypeError, ValueError):
+        raise MechanismError(f"q: expected joint values or a KinResult, got {q!r}") from None
+    nq = len(mech.joint_names)
+    if qq.shape != (nq,) or not np.all(np.isfinite(qq)):
+        raise MechanismError(
+            f"q: expected {nq} finite joint values {list(mech.joint_names)} (KinResult.q) or "
+            f"a KinResult, got shape {qq.shape}"
+        )
+    return model.qa_of(qq), model.x_from_q(qq)
+
+
+def _quat_rate(quat: np.ndarray) -> np.ndarray:
+    """E (4x3) with quat_dot = E w for a base-frame angular velocity w (quat = (w, x, y, z))."""
+    qw, qv = quat[0], quat[1:]
+    S = np.array([[0, -qv[2], qv[1]], [qv[2], 0, -qv[0]], [-qv[1], qv[0], 0]])
+    return 0.5 * np.vstack([-qv[None, :], qw * np.eye(3) - S])
+
+
+def _khalil_twist(model: Model) -> ca.Function:
+    """(q_a, x) -> (J_a, J_x): the 6-row twist Jacobian (v; w) of the end-effector frame."""
+    key = model.mech.key
+    f = _KH_CACHE.get(key)
+    if f is None:
+        with _KH_LOCK:
+            qa, x = model.qa_sym, model.x_sym
+            T = model.pose_fn(qa, x)
+            p, R = T[:3, 3], T[:3, :3]
+            z = ca.vertcat(qa, x)
+            Jv = ca.jacobian(p, z)
+            # w = 1/2 sum_k r_k x r_k_dot over the columns r_k of R
+            Jw = ca.SX.zeros(3, z.shape[0])
+            for k in range(3):
+                rk = R[:, k]
+                dk = ca.jacobian(rk, z)
+                for j in range(z.shape[0]):
+                    Jw[:, j] += 0.5 * ca.cross(rk, dk[:, j])
+            J = ca.vertcat(Jv, Jw)
+            na = model.na
+            f = ca.Function("twist", [qa, x], [J[:, :na], J[:, na:]], ["qa", "x"], ["J_a", "J_x"])
+            _KH_CACHE[key] = f
+    return f
+
+
+def _null(M: np.ndarray, tol: float) -> np.ndarray:
+    """Orthonormal basis of the null space of M (singular values <= tol * largest)."""
+    if M.shape[1] == 0:
+        return np.zeros((0, 0))
+    if M.shape[0] == 0:
+        return np.eye(M.shape[1])
+    _, s, Vt = np.linalg.svd(M)
+    smax = s[0] if s.size else 0.0
+    rank = int(np.sum(s > tol * max(smax, 1e-300)))
+    return Vt[rank:].T.copy()
+
+
+def _range(M: np.ndarray, tol: float, scale: float) -> np.ndarray:
+    """Orthonormal basis of the range of M (singular values > tol * scale)."""
+    if M.size == 0:
+        return np.zeros((M.shape[0], 0))
+    U, s, _ = np.linalg.svd(M, full_matrices=False)
+    rank = int(np.sum(s > tol * max(scale, 1e-300)))
+    return U[:, :rank].copy()
+
+
+def static_model(mech: Mechanism, q: Any, sing_tol: float = SING_TOL) -> StaticModel:
+    """The static model (2) of ``mech`` at configuration ``q``.
+
+    Parameters
+    ----------
+    mech : Mechanism
+    q : array or KinResult
+        A configuration: ``KinResult.q`` (all joints) or the KinResult itself.
+    sing_tol : float
+        Relative tolerance on singular values for the singularity tests.
+
+    Returns
+    -------
+    StaticModel
+
+    Examples
+    --------
+    A 3-RPR whose three legs meet at the platform origin cannot resist a moment there:
+
+    >>> import numpy as np, optkin
+    >>> c, s = np.cos(2 * np.pi / 3), np.sin(2 * np.pi / 3)
+    >>> base = np.array([[1, 0], [c, s], [c, -s]])
+    >>> m = optkin.mechanisms.rpr3(base, 0.2 * base)
+    >>> sm = static_model(m, optkin.inverse(m, [0, 0, 0])[0])
+    >>> sm.singularity, np.round(np.abs(sm.unresisted.ravel()), 12).tolist()
+    ('parallel', [0.0, 0.0, 1.0])
+    """
+    model = get_model(mech)
+    qa, x = _config(model, q)
+    _, Wp, Wa = model.jac(qa, x)
+    Wp, Wa = np.array(Wp), np.array(Wa)
+    names = wrench_names(mech)
+    if mech.kind == "legs":
+        nl = len(mech.legs)
+        if mech.platform == "spatial":
+            quat = x[3:7] / np.linalg.norm(x[3:7])
+            E = np.zeros((7, 6))
+            E[:3, :3] = np.eye(3)
+            E[3:, 3:] = _quat_rate(quat)
+            A = Wp[:nl] @ E
+        else:
+            A = Wp[:nl]
+        B = Wa[:nl]
+        P = np.zeros((nl, 0))
+    else:
+        Ja, Jx = (np.array(v) for v in _khalil_twist(model)(qa, x))
+        rows = [_TASK_TO_TWIST[c] for c in mech.task]
+        m, r = len(rows), Wp.shape[0]
+        A = np.vstack([np.eye(m), np.zeros((r, m))])
+        B = np.vstack([-Ja[rows], Wa])
+        P = np.vstack([-Jx[rows], Wp])
+    return _assemble(A, B, P, names, tuple(mech.active_names), sing_tol)
+
+
+def _assemble(A, B, P, names, act_names, sing_tol) -> StaticModel:
+    m, na = A.shape[1], B.shape[1]
+    AP = np.hstack([A, P])
+    sv = np.linalg.svd(AP, compute_uv=False) if AP.size else np.zeros(0)
+    # parallel singularity: twists t with A t + P qp_dot = 0
+    Nap = _null(AP, sing_tol)
+    unres = _range(Nap[:m], sing_tol, 1.0) if Nap.size else np.zeros((m, 0))
+    # serial singularity: multipliers with B^T l = 0 and P^T l = 0 but A^T l != 0
+    Nbp = _null(np.hstack([B, P]).T, sing_tol)
+    scaleA = float(np.linalg.norm(A, 2)) if A.size else 1.0
+    free = _range(A.T @ Nbp, sing_tol, scaleA) if Nbp.size else np.zeros((m, 0))
+    kinds = [k for k, v in (("parallel", unres.shape[1]), ("serial", free.shape[1])) if v]
+    singularity = "+".join(kinds) if kinds else "none"
+    smin_needed = sv[min(m + P.shape[1], sv.size) - 1] if sv.size else 0.0
+    cond = float(sv[0] / smin_needed) if sv.size and smin_needed > 0 else float("inf")
+    # G: F = G tau on the multipliers with P^T l = 0
+    G = J = None
+    Npl = _null(P.T, sing_tol) if P.shape[1] else np.eye(A.shape[0])
+    BN = B.T @ Npl
+    if BN.shape[0] == BN.shape[1] and "serial" not in kinds:
+        try:
+            G = -(A.T @ Npl) @ np.linalg.inv(BN)
+        except np.linalg.LinAlgError:
+            G = None
+    if G is not None and m == na and "parallel" not in kinds:
+        try:
+            J = np.linalg.inv(G.T)
+        except np.linalg.LinAlgError:
+            J = None
+    return StaticModel(A, B, P, tuple(names), tuple(act_names), G, J, unres, free, singularity,
+                       cond, sing_tol)

@@ -1,0 +1,113 @@
+"""Pictures of the statics analyses (PNG files through matplotlib's Agg backend)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+import numpy as np
+
+from .results import CapabilityResult, WorkspaceResult
+
+__all__ = ["plot_capability", "plot_workspace"]
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_capability(
+    res: CapabilityResult,
+    path: str | os.PathLike[str],
+    plane: Sequence[str] = ("fx", "fy"),
+    title: str | None = None,
+) -> str:
+    """Draw the capability polygon of ``res`` in the plane of two wrench components.
+
+    Directions whose other components are non-zero are skipped; unresisted directions are
+    drawn at the origin in red, unbounded ones as arrows. Returns the path written.
+    """
+    plt = _plt()
+    names = list(res.wrench_names)
+    i, j = names.index(plane[0]), names.index(plane[1])
+    other = [k for k in range(len(names)) if k not in (i, j)]
+    D = res.directions
+    inplane = np.all(np.abs(D[:, other]) < 1e-12, axis=1) if other else np.ones(len(D), bool)
+    ang = np.arctan2(D[:, j], D[:, i])
+    order = [k for k in np.argsort(ang) if inplane[k]]
+    fig, ax = plt.subplots(figsize=(5.2, 5.0))
+    fin = [k for k in order if np.isfinite(res.max[k])]
+    if fin:
+        pts = np.array([[res.points[k, i], res.points[k, j]] for k in fin])
+        closed = np.vstack([pts, pts[:1]])
+        ax.fill(closed[:, 0], closed[:, 1], alpha=0.25, color="C0")
+        ax.plot(closed[:, 0], closed[:, 1], "-", color="C0", lw=1.5, label="capability")
+    unres = [k for k in order if res.direction_status[k] == "unresisted"]
+    if unres:
+        ax.plot(0, 0, "o", color="C3", label=f"{len(unres)} unresisted directions")
+    unb = [k for k in order if res.direction_status[k] == "unbounded"]
+    for k in unb:
+        ax.annotate("", xy=(D[k, i], D[k, j]), xytext=(0, 0),
+                    arrowprops={"arrowstyle": "->", "color": "C2"})
+    ax.plot(0, 0, "k+")
+    ax.set_xlabel(plane[0])
+    ax.set_ylabel(plane[1])
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(title or f"capability polygon ({res.status}, cond {res.cond:.3g})", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return str(path)
+
+
+def plot_workspace(
+    res: WorkspaceResult, path: str | os.PathLike[str], title: str | None = None
+) -> str:
+    """Map of the wrench-feasibility margin over the grid (or scatter of the poses).
+
+    Green: feasible (margin >= 0); the 0 contour bounds the wrench-feasible workspace;
+    grey: unreachable; black crosses: singular (the set is not resisted).
+    """
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.0, 5.0))
+    P, M = res.poses, res.margin.copy()
+    M[np.isneginf(M)] = np.nan
+    lim = np.nanmax(np.abs(M)) if np.any(np.isfinite(M)) else 1.0
+    lim = min(lim, 1.0) if lim > 0 else 1.0
+    if res.grid_shape is not None:
+        X = P[:, 0].reshape(res.grid_shape)
+        Y = P[:, 1].reshape(res.grid_shape)
+        Z = M.reshape(res.grid_shape)
+        pc = ax.pcolormesh(X, Y, np.ma.masked_invalid(Z), cmap="RdYlGn", vmin=-lim, vmax=lim,
+                           shading="nearest")
+        if np.any(np.isfinite(Z)) and np.nanmin(Z) < 0 < np.nanmax(Z):
+            ax.contour(X, Y, np.nan_to_num(Z, nan=-lim), levels=[0.0], colors="k",
+                       linewidths=1.2)
+    else:
+        pc = ax.scatter(P[:, 0], P[:, 1], c=M, cmap="RdYlGn", vmin=-lim, vmax=lim, s=18)
+    st = np.array(res.point_status)
+    un = st == "unreachable"
+    if un.any():
+        ax.plot(P[un, 0], P[un, 1], ".", color="0.6", ms=3, label="unreachable")
+    sg = st == "singular"
+    if sg.any():
+        ax.plot(P[sg, 0], P[sg, 1], "kx", ms=4, label="not resisted (singular)")
+    fig.colorbar(pc, ax=ax, label="margin (fraction of actuator limit left)")
+    ax.set_xlabel(res.axes[0])
+    ax.set_ylabel(res.axes[1])
+    ax.set_aspect("equal", adjustable="box")
+    if un.any() or sg.any():
+        ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(title or f"wrench-feasible workspace: {res.fraction:.0%} of reachable poses",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return str(path)
