@@ -41,7 +41,7 @@ BATCH_DEFAULTS: dict[str, Any] = {
     "chunk": 128,  # points per compiled call (one compiled library per chunk size)
     "iters": 2,  # path: Newton corrections after the Euler predictor
     "max_iter": 40,  # independent rows: damped Newton iterations
-    "threads": 2,  # independent rows: threads of the mapped step
+    "threads": 1,  # independent rows: threads of the mapped step (2 was slower here)
     "fallback": True,  # re-solve failed points with optkin.forward (Newton, then IPOPT)
 }
 

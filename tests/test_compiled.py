@@ -1,0 +1,300 @@
+"""The compiled path (optkin.model.compiled), the fused result evaluation and forward_batch.
+
+Evidence: the compiled Functions are compared with the interpreted SX Functions they were
+generated from, the fused joint values with the numpy implementation of the legs
+(``Model.to_q``), and forward_batch with per-call forward and with the closed-form inverse
+model of the 3-RPR (leg lengths = distances between the solved platform points and the base
+points, written here in numpy). Only small mechanisms are compiled, into a per-session cache.
+No timings here: those are in benchmarks/.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import optkin
+from optkin import mechanisms as lib
+from optkin.model import compiled as cc
+from optkin.model.core import Model
+from optkin.model.fused import result_function
+
+RNG = np.random.default_rng(8)
+
+BASE3 = [[0.0, 0.0], [1.0, 0.0], [0.3, 0.9]]
+PLAT3 = [[0.0, 0.0], [0.25, 0.0], [0.1, 0.2]]
+
+
+def rpr() -> optkin.Mechanism:
+    return lib.rpr3(BASE3, PLAT3)
+
+
+def stewart() -> optkin.Mechanism:
+    ab = np.deg2rad([-10, 10, 110, 130, 230, 250])
+    ap = np.deg2rad([-50, 50, 70, 170, 190, 290])
+    base = np.c_[np.cos(ab), np.sin(ab), np.zeros(6)]
+    plat = 0.5 * np.c_[np.cos(ap), np.sin(ap), np.zeros(6)]
+    return lib.stewart_gough(base, plat, home=[0.05, -0.03, 1.0, 0.1, -0.05, 0.2])
+
+
+def small_library() -> dict[str, optkin.Mechanism]:
+    return {
+        "rpr3": rpr(),
+        "rrr3": lib.rrr3(BASE3, PLAT3, 0.6, 0.6),
+        "five_bar": lib.five_bar(1.0, 1.0, 1.0, 1.0, 1.0),
+        "four_bar": lib.four_bar(1.0, 2.0, 2.0, 2.5),
+        "stewart": stewart(),
+        "delta": lib.delta(),
+        "sr400": lib.sr400(),
+    }
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    d = tmp_path_factory.mktemp("optkin-cache")
+    mp = pytest.MonkeyPatch()
+    mp.setenv("OPTKIN_CACHE", str(d))
+    mp.setenv("OPTKIN_COMPILE", "auto")
+    mp.delenv("OPTKIN_CC", raising=False)
+    yield d
+    mp.undo()
+
+
+def _random_inputs(model: Model, n: int):
+    for _ in range(n):
+        qa = RNG.uniform(0.5, 1.5, model.na)
+        x = model.default_x(qa) + RNG.normal(0, 0.1, model.nx)
+        yield qa, x
+
+
+def _same_angles(a, b) -> float:
+    d = np.asarray(a) - np.asarray(b)
+    return float(np.max(np.abs(np.arctan2(np.sin(d), np.cos(d)))))
+
+
+needs_cc = pytest.mark.skipif(cc.find_compiler() is None, reason="no C compiler")
+
+
+@needs_cc
+@pytest.mark.parametrize("name", ["rpr3", "four_bar"])
+def test_compiled_functions_match_interpreted(cache, name):
+    mech = small_library()[name]
+    model = Model(mech)
+    assert model.compile()
+    assert model.compiled and model.step.is_a("External")
+    assert any(p.suffix in (".so", ".dll") for p in cache.iterdir())
+    lib_fns = model.compiled_fns
+    result_sx = result_function(model)
+    for qa, x in _random_inputs(model, 20):
+        # phi, jac and pose_fn stay the interpreted SX Functions; step_sx is the SX step
+        pairs = [(lib_fns["Phi"], model.phi), (lib_fns["W"], model.jac),
+                 (lib_fns["newton_step"], model.step_sx), (lib_fns["pose"], model.pose_fn),
+                 (lib_fns["result"], result_sx)]
+        for fc, fi in pairs:
+            assert not fi.is_a("External")
+            oc, oi = fc(qa, x), fi(qa, x)
+            oc = oc if isinstance(oc, (list, tuple)) else [oc]
+            oi = oi if isinstance(oi, (list, tuple)) else [oi]
+            for a, b in zip(oc, oi):
+                np.testing.assert_allclose(np.array(a), np.array(b), rtol=0, atol=1e-12)
+        # the buffered evaluators give the same numbers as the Function call
+        xn, r = model.fast("newton_step")(qa, x)
+        xi, ri = model.step_sx(qa, x)
+        np.testing.assert_allclose(xn, np.array(xi).ravel(), rtol=0, atol=1e-12)
+        assert abs(r[0] - float(ri)) <= 1e-12
+
+
+@needs_cc
+def test_second_model_loads_from_cache(cache):
+    mech = rpr()
+    m1 = Model(mech)
+    assert m1.compile()
+    m2 = Model(mech)  # auto mode: a cached library is loaded when the model is built
+    assert m2.compiled
+
+
+@needs_cc
+def test_compiled_tracker_matches_interpreted(cache, monkeypatch):
+    mech = rpr()
+    model = Model(mech)
+    f_c, compiled = model.tracker(16, 2)
+    assert compiled
+    monkeypatch.setenv("OPTKIN_COMPILE", "off")
+    f_i, compiled_i = Model(mech).tracker(16, 2)
+    assert not compiled_i
+    x0 = model.default_x(np.ones(3))
+    qa0 = np.array([0.8, 0.9, 0.7])
+    QA = qa0[:, None] + 0.01 * RNG.normal(size=(3, 16))
+    for a, b in zip(f_c(x0, qa0, QA), f_i(x0, qa0, QA)):
+        np.testing.assert_allclose(np.array(a), np.array(b), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", list(small_library()))
+def test_fused_joint_values_match_numpy(name):
+    """The joint values of the fused result Function vs Model.to_q (numpy leg_joints)."""
+    mech = small_library()[name]
+    model = optkin.get_model(mech)
+    f = result_function(model)
+    for qa, x in _random_inputs(model, 10):
+        x = model.canonical_x(x)
+        phi, Wp, T, q = (np.array(v) for v in f(qa, x))
+        assert _same_angles(q.ravel(), model.to_q(qa, x)) <= 1e-12
+        np.testing.assert_allclose(T, model.pose(qa, x), atol=1e-14)
+        _, Wp_ref, _ = model.jac(qa, x)
+        np.testing.assert_allclose(Wp, np.array(Wp_ref), atol=1e-14)
+
+
+def test_fallback_without_compiler(tmp_path, monkeypatch):
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+    monkeypatch.setenv("OPTKIN_CC", "no-such-compiler-optkin")
+    assert cc.find_compiler() is None
+    mech = lib.five_bar(1.0, 1.0, 1.0, 1.0, 1.1)
+    model = Model(mech)
+    assert model.compile() is False
+    assert not model.compiled and model.step is model.step_sx
+    assert model.compiled_batch_step(4).n_in() == 2  # the interpreted step, mapped
+    f, compiled = model.tracker(8, 2)
+    assert not compiled
+    assert list(tmp_path.glob("*.so")) == []
+
+
+def test_compile_off(monkeypatch):
+    monkeypatch.setenv("OPTKIN_COMPILE", "off")
+    assert cc.find_compiler() is None
+    assert cc.library("core:x", []) is None
+    model = Model(lib.five_bar(1.0, 1.0, 1.0, 1.0, 1.2))
+    assert model.compile() is False
+
+
+def test_cache_dir_falls_back_when_not_writable(tmp_path, monkeypatch):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    monkeypatch.setenv("OPTKIN_CACHE", str(blocker / "sub"))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(blocker / "xdg"))
+    d = cc.cache_dir()
+    assert d is not None and d.is_dir() and os.access(d, os.W_OK)
+    assert blocker not in d.parents
+
+
+def test_model_pickles_by_mechanism():
+    mech = rpr()
+    model = optkin.get_model(mech)
+    assert pickle.loads(pickle.dumps(model)) is model
+
+
+# ------------------------------------------------------------------ forward_batch
+def _rpr_path(mech, n):
+    """Platform poses along a smooth path and their leg lengths (closed form, numpy)."""
+    t = np.linspace(0.0, 1.0, n)
+    X = np.c_[0.45 + 0.05 * np.sin(2 * np.pi * t), 0.35 + 0.05 * t,
+              0.2 + 0.3 * np.sin(np.pi * t)]
+    QA = np.empty((n, 3))
+    for i, (x, y, phi) in enumerate(X):
+        c, s = np.cos(phi), np.sin(phi)
+        for k, leg in enumerate(mech.legs):
+            b = np.asarray(leg.base)[:2]
+            p = np.asarray(leg.platform)[:2]
+            P = np.array([x + c * p[0] - s * p[1], y + s * p[0] + c * p[1]])
+            QA[i, k] = np.linalg.norm(P - b)
+    return X, QA
+
+
+def _rpr_leg_lengths(mech, X):
+    out = np.empty((len(X), 3))
+    for i, (x, y, phi) in enumerate(X):
+        c, s = np.cos(phi), np.sin(phi)
+        for k, leg in enumerate(mech.legs):
+            b = np.asarray(leg.base)[:2]
+            p = np.asarray(leg.platform)[:2]
+            out[i, k] = np.hypot(x + c * p[0] - s * p[1] - b[0], y + s * p[0] + c * p[1] - b[1])
+    return out
+
+
+@pytest.mark.parametrize("path", [True, False])
+def test_forward_batch_rpr_closed_form(cache, path):
+    mech = rpr()
+    Xtrue, QA = _rpr_path(mech, 400)
+    guess = Xtrue[0] if path else Xtrue + 0.01
+    br = optkin.forward_batch(mech, QA, guess=guess, path=path)
+    assert br.all_success and br.status == "optimal"
+    assert br.x.shape == (400, 3) and len(br) == 400
+    assert np.max(br.residual) <= 1e-10
+    # closed form: the legs of the solved poses have the given lengths
+    np.testing.assert_allclose(_rpr_leg_lengths(mech, br.x), QA, rtol=0, atol=1e-10)
+    # continuity: the assembly mode of the generating path is the one followed
+    np.testing.assert_allclose(br.x[:, :2], Xtrue[:, :2], atol=1e-8)
+    assert _same_angles(br.x[:, 2], Xtrue[:, 2]) <= 1e-8
+
+
+def test_forward_batch_matches_forward(cache):
+    mech = rpr()
+    Xtrue, QA = _rpr_path(mech, 60)
+    br = optkin.forward_batch(mech, QA, guess=Xtrue[0], chunk=16)
+    r = optkin.forward(mech, QA[0], guess=Xtrue[0])
+    for i in range(len(QA)):
+        r = optkin.forward(mech, QA[i], guess=r)  # warm-started per-call tracking
+        assert r.success
+        assert np.max(np.abs(r.x - br.x[i])) <= 1e-9
+    kr = br.result(30)
+    assert kr.success and kr.q.shape == (9,)
+    np.testing.assert_allclose(br.q()[30], kr.q, atol=1e-12)
+    np.testing.assert_allclose(br.poses()[30], kr.pose, atol=1e-12)
+    # columns layout (na, n) is accepted too
+    bc = optkin.forward_batch(mech, QA.T, guess=Xtrue[0], chunk=16)
+    np.testing.assert_allclose(bc.x, br.x, atol=1e-12)
+
+
+def test_forward_batch_interpreted_fallback(monkeypatch):
+    monkeypatch.setenv("OPTKIN_COMPILE", "off")
+    mech = lib.rpr3(BASE3, [[0.0, 0.0], [0.25, 0.0], [0.1, 0.21]])
+    Xtrue, QA = _rpr_path(mech, 50)
+    br = optkin.forward_batch(mech, QA, guess=Xtrue[0], chunk=16)
+    assert br.all_success and br.stats.extra["compiled"] is False
+    np.testing.assert_allclose(_rpr_leg_lengths(mech, br.x), QA, atol=1e-10)
+
+
+def test_forward_batch_reports_unreachable_rows(cache):
+    mech = rpr()
+    Xtrue, QA = _rpr_path(mech, 40)
+    QA = QA.copy()
+    QA[20] = [0.01, 5.0, 0.01]  # the legs cannot close
+    br = optkin.forward_batch(mech, QA, guess=Xtrue[0], chunk=16)
+    assert not br.success[20] and br.success.sum() == 39
+    assert br.status == "infeasible" and "row 20" in br.message
+    np.testing.assert_allclose(br.x[21:, :2], Xtrue[21:, :2], atol=1e-8)
+
+
+def test_forward_batch_bad_input():
+    with pytest.raises(optkin.MechanismError, match=r"QA: expected an \(n, 3\) array"):
+        optkin.forward_batch(rpr(), np.ones((5, 4)))
+    with pytest.raises(optkin.MechanismError, match="positive"):
+        optkin.forward_batch(rpr(), -np.ones((5, 3)))
+
+
+@needs_cc
+@pytest.mark.slow
+def test_concurrent_compilation(tmp_path):
+    """Two processes compiling the same model at once both end with a working library."""
+    code = textwrap.dedent("""
+        import numpy as np, optkin
+        from optkin.model.core import Model
+        m = Model(optkin.mechanisms.five_bar(1.0, 1.0, 1.0, 1.0, 1.05))
+        assert m.compile()
+        r = optkin.forward(m.mech, [1.4, 1.8])
+        print(m.compiled, r.success)
+    """)
+    env = dict(os.environ, OPTKIN_CACHE=str(tmp_path))
+    procs = [subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(3)]
+    outs = [p.communicate(timeout=120) for p in procs]
+    for p, (out, err) in zip(procs, outs):
+        assert p.returncode == 0, err
+        assert out.split() == ["True", "True"]
+    assert len(list(tmp_path.glob("*.so"))) == 1
+    assert not list(tmp_path.glob(".build-*"))
