@@ -2,8 +2,12 @@
 singularity classification and maps (seed 000 7.8-7.11, Modern Robotics 7.2-7.3, seeds 003
 and 004)."""
 
+from .continuation import Curve, SingularCurves, singular_curves
 from .mobility import DofReport, dof
 from .singularity import SingularityReport, classify
 from .velocity import Jacobians, jacobians
 
-__all__ = ["DofReport", "Jacobians", "SingularityReport", "classify", "dof", "jacobians"]
+__all__ = [
+    "Curve", "DofReport", "Jacobians", "SingularCurves", "SingularityReport", "classify", "dof",
+    "jacobians", "singular_curves",
+]

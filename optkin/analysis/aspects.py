@@ -1,0 +1,646 @@
+"""Working modes, generalized aspects and workspaces of planar parallel mechanisms.
+
+Chablat and Wenger (seed 004): a working mode Mf_i is a set of configurations where the
+signs of the diagonal entries B_jj of the inverse-kinematics matrix stay constant and
+nonzero (Definition 4); the generalized aspects A_ij are the maximal connected subsets of a
+working mode free of parallel singularities, det A != 0 (Definition 5); their projections
+are the parallel aspects WA_ij in the workspace (Definition 6) and the serial aspects QA_ij
+in the joint space (Definition 7).
+
+For legs that are not cuspidal (RPR, RRR), one working mode maps homeomorphically onto its
+workspace region (each leg's posture is the closed-form branch of the mode), so the aspects
+of Mf_i are the faces, inside W_i, of the planar arrangement of the curves that bound them in
+the workspace plane: the serial curves B_jj = 0 and joint-limit curves of this working mode
+(the boundary of W_i) and the parallel curves det A = 0 of this working mode, all traced by
+continuation (:mod:`optkin.analysis.continuation`). Connectivity thus follows the traced
+curves (:mod:`optkin.analysis.planar`): a thin or small aspect is a face like any other.
+The joint-space projection QA_ij is a mask on a grid of q_a (closed-form direct kinematics
+of two-leg point platforms), with its area; the workspace projection WA_ij is a polygon
+with holes and its exact (polygon) area.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import MechanismError
+from ..mechanism import Mechanism
+from ..model import get_model
+from .continuation import (
+    SingularCurves,
+    _full_from_x,
+    _split_wrapped,
+    augmented_system,
+    singular_curves,
+)
+from .planar import Face, faces
+
+__all__ = ["Aspect", "Aspects", "Workspace", "aspects", "workspace", "leg_working_modes"]
+
+
+def leg_working_modes(mech: Mechanism) -> list[tuple[int, ...]]:
+    """All sign patterns of diag(B) of a planar RPR/RRR leg mechanism (seed 004, Def. 4).
+
+    RRR legs have two postures (B_jj of either sign); for an RPR leg B_jj = -1 always.
+    """
+    if mech.kind != "legs":
+        raise MechanismError(f"{mech.name}: working modes are defined for leg mechanisms")
+    opts = []
+    for leg in mech.legs:
+        if leg.type == "RRR":
+            opts.append((1, -1))
+        elif leg.type == "RPR":
+            opts.append((-1,))
+        else:
+            raise MechanismError(f"{mech.name}: leg type {leg.type} is not planar")
+    return [tuple(p) for p in itertools.product(*opts)]
+
+
+@dataclass
+class Aspect:
+    """One generalized aspect A_ij (seed 004, Definition 5).
+
+    Attributes
+    ----------
+    working_mode : tuple of int
+        Signs of the B_jj in it.
+    det_sign : int
+        Sign of det A (= det W_p) in it.
+    face : Face
+        Its workspace projection WA_ij (outer ring and holes) in the plane.
+    area : float
+        The area of WA_ij (polygon area).
+    v : ndarray
+        A representative configuration (q_a then x), well inside.
+    qa_mask : ndarray of bool or None
+        Its joint-space projection QA_ij on the grid ``Aspects.qa_grid``.
+    qa_area : float or None
+        The area of QA_ij (cells times cell area).
+    """
+
+    working_mode: tuple[int, ...]
+    det_sign: int
+    face: Face
+    area: float
+    v: np.ndarray
+    qa: np.ndarray
+    x: np.ndarray
+    qa_mask: np.ndarray | None = None
+    qa_area: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"working_mode": list(self.working_mode), "det_sign": self.det_sign,
+                "area": self.area, "qa_area": self.qa_area, "qa": self.qa.tolist(),
+                "x": self.x.tolist(), "n_holes": len(self.face.holes)}
+
+
+@dataclass
+class Aspects:
+    """The generalized aspects of every working mode (see :func:`aspects`)."""
+
+    mechanism: str
+    working_modes: list[tuple[int, ...]]
+    aspects: list[Aspect]
+    curves: SingularCurves
+    plane: tuple[str, str]
+    qa_names: tuple[str, ...]
+    qa_grid: tuple[np.ndarray, np.ndarray] | None
+    success: bool
+    status: str
+    message: str
+    time: float = 0.0
+    workspace_area: dict[tuple[int, ...], float] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.aspects)
+
+    def __iter__(self):
+        return iter(self.aspects)
+
+    def of_mode(self, mode: tuple[int, ...]) -> list[Aspect]:
+        return [a for a in self.aspects if a.working_mode == tuple(mode)]
+
+    @property
+    def counts(self) -> dict[tuple[int, ...], int]:
+        return {m: len(self.of_mode(m)) for m in self.working_modes}
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "mechanism": self.mechanism, "success": self.success, "status": self.status,
+            "message": self.message, "count": len(self.aspects),
+            "n_working_modes": len(self.working_modes),
+            "working_modes": [list(m) for m in self.working_modes],
+            "counts": [self.counts[m] for m in self.working_modes],
+            "aspects": [a.to_dict() for a in self.aspects], "time": self.time,
+            "workspace_area": [self.workspace_area.get(m) for m in self.working_modes],
+        }
+
+    def plot(self, path: str | None = None, title: str | None = None) -> Any:
+        """One column per working mode: its aspects in the workspace and the joint space."""
+        return _plot_aspects(self, path, title)
+
+
+@dataclass
+class Workspace:
+    """The reachable workspace in a plane, per working mode and in total."""
+
+    mechanism: str
+    plane: tuple[str, str]
+    working_modes: list[tuple[int, ...]]
+    regions: dict[tuple[int, ...], list[Face]]
+    areas: dict[tuple[int, ...], float]
+    total: list[Face]
+    area: float
+    curves: SingularCurves
+    success: bool
+    status: str
+    message: str
+    time: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"mechanism": self.mechanism, "success": self.success, "status": self.status,
+                "message": self.message, "area": self.area,
+                "working_modes": [list(m) for m in self.working_modes],
+                "areas": [self.areas[m] for m in self.working_modes],
+                "n_regions": [len(self.regions[m]) for m in self.working_modes],
+                "time": self.time}
+
+    def plot(self, path: str | None = None, title: str | None = None) -> Any:
+        return _plot_workspace(self, path, title)
+
+
+# ---------------------------------------------------------------------------------------
+
+
+def _runs(curves: SingularCurves, mode: tuple[int, ...], kinds: tuple[str, ...]) -> list[tuple[np.ndarray, bool]]:
+    """The pieces of the traced curves that lie in working mode ``mode`` (plane points).
+
+    A piece ends where some B_kk changes sign; its end is interpolated to B_kk = 0 and
+    later snapped onto the serial curve it meets.
+    """
+    out = []
+    m = np.array(mode)
+    for c in curves.curves:
+        if not c.kind.startswith(kinds):
+            continue
+        cmp = np.ones(len(m), dtype=bool)
+        if c.kind.startswith("serial:"):
+            cmp[int(c.kind.split(":")[1])] = False
+        S = np.sign(c.B)
+        inm = np.all(S[:, cmp] == m[cmp], axis=1)
+        if inm.all():
+            out.append((c.points, c.closed))
+            continue
+        if not inm.any():
+            continue
+        n = len(inm)
+        idx = np.arange(n)
+        if c.closed:  # rotate so that the curve starts out of the mode
+            k0 = int(np.flatnonzero(~inm)[0])
+            idx = np.roll(idx, -k0)
+        flags = inm[idx]
+        P = c.points[idx]
+        Bv = c.B[idx]
+        k = 0
+        while k < n:
+            if not flags[k]:
+                k += 1
+                continue
+            j = k
+            while j + 1 < n and flags[j + 1]:
+                j += 1
+            pts = [P[k:j + 1]]
+            if k > 0:
+                pts.insert(0, _cross(P[k - 1], P[k], Bv[k - 1], Bv[k], m, cmp)[None])
+            if j + 1 < n:
+                pts.append(_cross(P[j], P[j + 1], Bv[j], Bv[j + 1], m, cmp)[None])
+            elif c.closed:
+                pts.append(_cross(P[j], P[0], Bv[j], Bv[0], m, cmp)[None])
+            run = np.vstack(pts)
+            if len(run) >= 2:
+                out.append((run, False))
+            k = j + 1
+    return out
+
+
+def _cross(pa, pb, ba, bb, m, cmp) -> np.ndarray:
+    """Linear interpolation where the first B_kk leaves its sign between two points."""
+    s = 1.0
+    for kk in np.flatnonzero(cmp):
+        if np.sign(ba[kk]) != np.sign(bb[kk]) and ba[kk] != bb[kk]:
+            s = min(s, ba[kk] / (ba[kk] - bb[kk]))
+    s = float(np.clip(s, 0, 1))
+    return pa + s * (pb - pa)
+
+
+def _box(bounds: np.ndarray) -> np.ndarray:
+    (x0, x1), (y0, y1) = bounds
+    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=float)
+
+
+def _label(mech: Mechanism, pidx, fixed: dict[int, float], P: np.ndarray, mode,
+           limits: dict[int, tuple[float, float]]) -> tuple[np.ndarray | None, float]:
+    """The configuration of working mode ``mode`` over plane point P, and det A there."""
+    model = get_model(mech)
+    na, nx = model.na, model.nx
+    x = np.zeros(nx)
+    for i, v in fixed.items():
+        if i >= na:
+            x[i - na] = v
+    for k, i in enumerate(pidx):
+        x[i - na] = P[k]
+    sys = augmented_system(mech, "parallel", tuple(sorted(fixed)))
+    for V, ok in _full_from_x(mech, x[None, :]):
+        if not ok[0]:
+            continue
+        v = V[0]
+        if any(not (lo <= v[i] <= hi) for i, (lo, hi) in limits.items()):
+            continue
+        d, B = sys.aux_many(v[:, None])
+        if tuple(np.sign(B[:, 0]).astype(int)) == tuple(mode):
+            return v, float(d[0])
+    return None, 0.0
+
+
+def _check_plane(mech: Mechanism, fixed: Mapping[str, float] | None):
+    if mech.kind != "legs" or not mech.planar:
+        raise MechanismError(
+            f"{mech.name}: aspects and workspaces are computed for planar leg mechanisms "
+            "(2-DoF point platforms, or 3-DoF platforms at a fixed orientation phi)")
+    model = get_model(mech)
+    fixed = dict(fixed or {})
+    if mech.platform == "planar" and set(fixed) != {"phi"}:
+        raise MechanismError(
+            f"{mech.name}: a 3-DoF platform needs a section at fixed orientation: "
+            "fixed={'phi': value}")
+    if mech.platform == "planar_point" and fixed:
+        raise MechanismError(f"{mech.name}: a 2-DoF point platform takes no fixed coordinates")
+    names = tuple(mech.active_names) + tuple(model.x_names)
+    return fixed, names
+
+
+def _limit_map(mech, names, limits):
+    out = {}
+    for k, (lo, hi) in dict(limits or {}).items():
+        if k not in names[: get_model(mech).na]:
+            raise MechanismError(f"limits: {k!r} is not an actuated joint of {mech.name}; "
+                                 f"known: {', '.join(mech.active_names)}")
+        out[names.index(k)] = (float(lo), float(hi))
+    return out
+
+
+def _region_faces(mech, curves, mode, bounds, snap, pidx, fixed_map, lim_map, with_parallel):
+    kinds = ("serial", "limit", "parallel") if with_parallel else ("serial", "limit")
+    lines = _runs(curves, mode, kinds)
+    lines.append((_box(bounds), True))
+    out = []
+    # slivers between a chord of a curve and the boundary it touches (a parallel curve meets
+    # the workspace boundary tangentially, at a fold) are below the resolution of the
+    # polylines: faces smaller than a fraction of a step squared are dropped
+    min_area = 0.02 * (snap / 3.0) ** 2
+    for f in faces(lines, snap=snap):
+        if f.point is None or f.area < min_area:
+            continue
+        v, d = _label(mech, pidx, fixed_map, f.point, mode, lim_map)
+        if v is None:
+            continue
+        out.append((f, v, d))
+    return out
+
+
+def aspects(
+    mech: Mechanism,
+    fixed: Mapping[str, float] | None = None,
+    limits: Mapping[str, tuple[float, float]] | None = None,
+    bounds: Any = None,
+    grid: int | None = None,
+    qa_grid: int = 200,
+    step: float | None = None,
+) -> Aspects:
+    """The generalized aspects of every working mode (Chablat and Wenger, seed 004).
+
+    Parameters
+    ----------
+    mech : Mechanism
+        A planar leg mechanism with RPR/RRR legs: a 2-DoF point platform (the five-bar), or
+        a 3-DoF platform in a section at fixed orientation (``fixed={"phi": value}``; the
+        aspects are then those of the section).
+    limits : dict name -> (lo, hi), optional
+        Actuated joint limits (the passive joints are unlimited).
+    bounds : [[lo, hi], [lo, hi]], optional
+        A box in the workspace plane (default: the reach of the legs).
+    grid : int, optional
+        Seeding grid of the continuation (it only seeds).
+    qa_grid : int
+        Resolution of the joint-space masks QA_ij (two-leg point platforms).
+    step : float, optional
+        Continuation step (scaled units).
+
+    Returns
+    -------
+    Aspects
+        ``aspects`` (each with working_mode, det_sign, face = WA polygon, area, v, qa_mask,
+        qa_area), ``counts`` per working mode, the traced ``curves``, success/status/message.
+    """
+    t0 = time.perf_counter()
+    fixed, names = _check_plane(mech, fixed)
+    lim_map = _limit_map(mech, names, limits)
+    model = get_model(mech)
+    kinds = ["parallel", "serial"] + (["limit"] if lim_map else [])
+    curves = singular_curves(mech, plane="workspace", kind=kinds, fixed=fixed, bounds=bounds,
+                             grid=grid, step=step, limits=limits, cusps=False)
+    pidx = curves.info["plane_index"]
+    fixed_map = {names.index(k): float(v) for k, v in fixed.items()}
+    snap = 3.0 * float(step or 0.05) * model.length
+    modes = leg_working_modes(mech)
+    out: list[Aspect] = []
+    wareas = {}
+    for mode in modes:
+        reg = _region_faces(mech, curves, mode, curves.bounds, snap, pidx, fixed_map, lim_map,
+                            True)
+        for f, v, d in reg:
+            out.append(Aspect(working_mode=mode, det_sign=int(np.sign(d)), face=f, area=f.area,
+                              v=v, qa=v[:model.na].copy(), x=v[model.na:].copy()))
+        wareas[mode] = float(sum(f.area for f, _, _ in reg))
+    qgrid = None
+    if mech.platform == "planar_point" and len(mech.legs) == 2 and out:
+        qgrid = _qa_masks(mech, out, qa_grid, lim_map)
+    ok = curves.success and all(a.det_sign != 0 for a in out)
+    counts = {m: sum(a.working_mode == m for a in out) for m in modes}
+    msg = (f"{len(modes)} working mode(s), aspects per mode "
+           f"{[counts[m] for m in modes]}; curves: {curves.message}")
+    return Aspects(mechanism=mech.name, working_modes=modes, aspects=out, curves=curves,
+                   plane=curves.plane, qa_names=tuple(mech.active_names), qa_grid=qgrid,
+                   success=bool(ok), status="ok" if ok else "inaccurate", message=msg,
+                   time=time.perf_counter() - t0, workspace_area=wareas)
+
+
+def _qa_range(mech: Mechanism, j: int) -> tuple[float, float]:
+    leg = mech.legs[j]
+    if leg.type == "RRR":
+        return (-np.pi, np.pi)
+    return (0.0, 2.0 * get_model(mech).length)
+
+
+def _fk_points(mech: Mechanism, Q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Closed-form direct kinematics of a two-leg point platform: circle intersections."""
+    cs, rs = [], []
+    for j, leg in enumerate(mech.legs):
+        A = leg.base[:2] - leg.platform[:2]
+        if leg.type == "RRR":
+            l1, l2 = leg.lengths
+            cs.append(A + l1 * np.stack([np.cos(Q[:, j]), np.sin(Q[:, j])], 1))
+            rs.append(np.full(len(Q), l2))
+        else:
+            cs.append(np.broadcast_to(A, (len(Q), 2)).copy())
+            rs.append(Q[:, j])
+    c0, c1 = cs
+    r0, r1 = rs
+    dv = c1 - c0
+    dd = np.hypot(dv[:, 0], dv[:, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (r0**2 - r1**2 + dd**2) / (2 * dd)
+        h2 = r0**2 - a**2
+        ok = (h2 >= 0) & (dd > 1e-12)
+        h = np.sqrt(np.where(ok, h2, 0))
+        e = dv / dd[:, None]
+    m = c0 + a[:, None] * e
+    nrm = np.stack([-e[:, 1], e[:, 0]], 1)
+    return [(m + h[:, None] * nrm, ok), (m - h[:, None] * nrm, ok)]
+
+
+def _qa_masks(mech, out: list[Aspect], n: int, lim_map) -> tuple[np.ndarray, np.ndarray]:
+    r0, r1 = _qa_range(mech, 0), _qa_range(mech, 1)
+    g0 = np.linspace(*r0, n, endpoint=False) + 0.5 * (r0[1] - r0[0]) / n
+    g1 = np.linspace(*r1, n, endpoint=False) + 0.5 * (r1[1] - r1[0]) / n
+    G0, G1 = np.meshgrid(g0, g1, indexing="ij")
+    Q = np.stack([G0.ravel(), G1.ravel()], 1)
+    cell = (r0[1] - r0[0]) * (r1[1] - r1[0]) / n**2
+    sys = augmented_system(mech, "parallel", ())
+    for a in out:
+        a.qa_mask = np.zeros(n * n, dtype=bool)
+    inlim = np.ones(len(Q), dtype=bool)
+    for i, (lo, hi) in lim_map.items():
+        inlim &= (Q[:, i] >= lo) & (Q[:, i] <= hi)
+    for P, ok in _fk_points(mech, Q):
+        ok = ok & inlim
+        idx = np.flatnonzero(ok)
+        if len(idx) == 0:
+            continue
+        V = np.hstack([Q[idx], P[idx]])
+        _, B = sys.aux_many(V.T)
+        S = np.sign(B.T).astype(int)
+        for a in out:
+            sel = np.all(S == np.array(a.working_mode), axis=1)
+            if not sel.any():
+                continue
+            ins = a.face.contains(P[idx[sel]])
+            a.qa_mask[idx[sel][ins]] = True
+    for a in out:
+        a.qa_mask = a.qa_mask.reshape(n, n)
+        a.qa_area = float(a.qa_mask.sum() * cell)
+    return g0, g1
+
+
+def workspace(
+    mech: Mechanism,
+    fixed: Mapping[str, float] | None = None,
+    limits: Mapping[str, tuple[float, float]] | None = None,
+    bounds: Any = None,
+    grid: int | None = None,
+    step: float | None = None,
+) -> Workspace:
+    """The reachable workspace in the plane, per working mode and in total.
+
+    Its boundary is made of serial singular curves (B_jj = 0) and joint-limit curves,
+    traced by continuation; the regions are the faces of their arrangement that the
+    working mode reaches, with polygon areas (seed 004, Figs. 9-12).
+
+    Parameters
+    ----------
+    mech : Mechanism
+        As for :func:`aspects`.
+    fixed, limits, bounds, grid, step
+        As for :func:`aspects`.
+
+    Returns
+    -------
+    Workspace
+        ``regions`` and ``areas`` per working mode, ``total`` (faces) and ``area`` of the
+        union, success/status/message.
+    """
+    t0 = time.perf_counter()
+    fixed, names = _check_plane(mech, fixed)
+    lim_map = _limit_map(mech, names, limits)
+    model = get_model(mech)
+    kinds = ["serial"] + (["limit"] if lim_map else [])
+    has_serial = any(leg.type == "RRR" for leg in mech.legs)
+    if not has_serial and not lim_map:
+        kinds = ["parallel"]  # only the box bounds the region; parallel curves unused
+    curves = singular_curves(mech, plane="workspace", kind=kinds, fixed=fixed, bounds=bounds,
+                             grid=grid, step=step, limits=limits, cusps=False)
+    pidx = curves.info["plane_index"]
+    fixed_map = {names.index(k): float(v) for k, v in fixed.items()}
+    snap = 3.0 * float(step or 0.05) * model.length
+    modes = leg_working_modes(mech)
+    regions, areas = {}, {}
+    all_lines = []
+    for mode in modes:
+        reg = _region_faces(mech, curves, mode, curves.bounds, snap, pidx, fixed_map, lim_map,
+                            False)
+        regions[mode] = [f for f, _, _ in reg]
+        areas[mode] = float(sum(f.area for f in regions[mode]))
+        all_lines += _runs(curves, mode, ("serial", "limit"))
+    all_lines.append((_box(curves.bounds), True))
+    total = []
+    for f in faces(all_lines, snap=snap, dedupe=0.01 * model.length):
+        if f.point is None:
+            continue
+        if any(_label(mech, pidx, fixed_map, f.point, m, lim_map)[0] is not None for m in modes):
+            total.append(f)
+    area = float(sum(f.area for f in total))
+    ok = curves.success or not has_serial
+    return Workspace(mechanism=mech.name, plane=curves.plane, working_modes=modes,
+                     regions=regions, areas=areas, total=total, area=area, curves=curves,
+                     success=bool(ok), status="ok" if ok else "inaccurate",
+                     message=f"workspace area {area:.6g}; per mode "
+                             f"{[round(areas[m], 6) for m in modes]}",
+                     time=time.perf_counter() - t0)
+
+
+# ---------------------------------------------------------------------------------------
+# pictures (matplotlib, Agg)
+# ---------------------------------------------------------------------------------------
+
+
+def _fig(nr, nc, w=4.0, h=4.0):
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    fig, axs = plt.subplots(nr, nc, figsize=(w * nc, h * nr), squeeze=False)
+    return fig, axs
+
+
+def _face_patch(f: Face, **kw):
+    from matplotlib.patches import PathPatch
+    from matplotlib.path import Path
+
+    verts, codes = [], []
+    for R in [f.outer] + list(f.holes):
+        verts += list(R) + [R[0]]
+        codes += [Path.MOVETO] + [Path.LINETO] * (len(R) - 1) + [Path.CLOSEPOLY]
+    return PathPatch(Path(np.array(verts), codes), **kw)
+
+
+def _save(fig, path):
+    if path is not None:
+        fig.savefig(path, dpi=90, bbox_inches="tight")
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    return fig
+
+
+_COLORS = {"parallel": "tab:red", "serial": "tab:blue", "limit": "tab:green",
+           "closure": "black"}
+
+
+def _plot_curves(res: SingularCurves, path=None, ax=None, title=None):
+    fig = None
+    if ax is None:
+        fig, axs = _fig(1, 1, 6, 6)
+        ax = axs[0, 0]
+    for c in res.curves:
+        col = _COLORS.get(c.kind.split(":")[0], "k")
+        for P in _split_wrapped(c.points, res.periodic):
+            ax.plot(P[:, 0], P[:, 1], color=col, lw=1.0)
+    if len(res.branch_points):
+        i0, i1 = res.info["plane_index"]
+        ax.plot(res.branch_points[:, i0], res.branch_points[:, i1], "ko", ms=4,
+                label="branch points")
+    if len(res.cusps):
+        i0, i1 = res.info["plane_index"]
+        ax.plot(res.cusps[:, i0], res.cusps[:, i1], "m^", ms=6, label="cusps")
+    ax.set_xlabel(res.plane[0])
+    ax.set_ylabel(res.plane[1])
+    kinds = sorted({c.kind.split(":")[0] for c in res.curves})
+    for k in kinds:
+        ax.plot([], [], color=_COLORS.get(k, "k"), label=k)
+    ax.legend(loc="best", fontsize=7)
+    ax.set_title(title or f"{res.mechanism}: singular curves ({', '.join(kinds)})", fontsize=9)
+    ax.set_xlim(*res.bounds[0])
+    ax.set_ylim(*res.bounds[1])
+    if not any(res.periodic):
+        ax.set_aspect("equal")
+    return _save(fig, path) if fig is not None else ax
+
+
+def _plot_aspects(res: Aspects, path=None, title=None):
+    import matplotlib.pyplot as plt
+
+    modes = res.working_modes
+    rows = 2 if res.qa_grid is not None else 1
+    fig, axs = _fig(rows, len(modes), 3.6, 3.6)
+    cmap = plt.get_cmap("tab10")
+    for j, mode in enumerate(modes):
+        ax = axs[0, j]
+        for k, a in enumerate(res.of_mode(mode)):
+            ax.add_patch(_face_patch(a.face, facecolor=cmap(k % 10), alpha=0.55,
+                                     edgecolor="k", lw=0.6))
+            ax.plot(*a.x[:2], "k.", ms=3)
+        for c in res.curves.curves:
+            if c.kind == "parallel":
+                sel = np.all(np.sign(c.B) == np.array(mode), axis=1)
+                P = np.where(sel[:, None], c.points, np.nan)
+                ax.plot(P[:, 0], P[:, 1], color="tab:red", lw=0.8)
+        ax.set_xlim(*res.curves.bounds[0])
+        ax.set_ylim(*res.curves.bounds[1])
+        ax.set_aspect("equal")
+        ax.set_title(f"Mf {mode}: {len(res.of_mode(mode))} aspect(s)", fontsize=8)
+        ax.set_xlabel(res.plane[0])
+        ax.set_ylabel(res.plane[1])
+        if rows == 2:
+            ax2 = axs[1, j]
+            g0, g1 = res.qa_grid
+            for k, a in enumerate(res.of_mode(mode)):
+                M = np.ma.masked_where(~a.qa_mask.T, np.full(a.qa_mask.T.shape, k % 10))
+                ax2.pcolormesh(g0, g1, M, cmap=cmap, vmin=0, vmax=9.99, alpha=0.6,
+                               shading="nearest")
+            ax2.set_xlabel(res.qa_names[0])
+            ax2.set_ylabel(res.qa_names[1])
+            ax2.set_title("serial aspects QA (joint space)", fontsize=8)
+    fig.suptitle(title or f"{res.mechanism}: generalized aspects per working mode", fontsize=10)
+    return _save(fig, path)
+
+
+def _plot_workspace(res: Workspace, path=None, title=None):
+    import matplotlib.pyplot as plt
+
+    modes = res.working_modes
+    fig, axs = _fig(1, len(modes) + 1, 3.6, 3.6)
+    cmap = plt.get_cmap("tab10")
+    for j, mode in enumerate(modes):
+        ax = axs[0, j]
+        for f in res.regions[mode]:
+            ax.add_patch(_face_patch(f, facecolor=cmap(j % 10), alpha=0.5, edgecolor="k", lw=0.6))
+        ax.set_title(f"Mf {mode}: area {res.areas[mode]:.4g}", fontsize=8)
+    ax = axs[0, -1]
+    for f in res.total:
+        ax.add_patch(_face_patch(f, facecolor="0.6", alpha=0.6, edgecolor="k", lw=0.6))
+    ax.set_title(f"workspace: area {res.area:.4g}", fontsize=8)
+    for ax in axs[0]:
+        ax.set_xlim(*res.curves.bounds[0])
+        ax.set_ylim(*res.curves.bounds[1])
+        ax.set_aspect("equal")
+        ax.set_xlabel(res.plane[0])
+        ax.set_ylabel(res.plane[1])
+    fig.suptitle(title or f"{res.mechanism}: workspace per working mode", fontsize=10)
+    return _save(fig, path)

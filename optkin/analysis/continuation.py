@@ -1,0 +1,1087 @@
+"""Singularity loci by pseudo-arclength continuation.
+
+A singular locus of a 2-DoF mechanism (or of a 2-D section of a 3-DoF one) is a curve in the
+configuration manifold {Phi(q_a, x) = 0}: the zero set of one more scalar function c on it,
+det W_p (parallel singularities; Chablat and Wenger's det A, seed 004), one B_jj (serial
+singularities of leg j), or q_a,j - limit (a joint-limit boundary). With the variables
+v = (q_a, x), the fixed ones of a section removed (z), the curve is the solution set of
+
+    G(z) = [Phi(z); c(z)] = 0,        G : R^n -> R^(n-1),
+
+traced here by a pseudo-arclength predictor-corrector: the tangent is the null vector of
+dG/dz (oriented by continuity), the corrector is Newton's method on [G; t.(z - z_pred)] = 0,
+the step adapts to the Newton effort and the turning of the tangent, and a curve stops when
+it closes (angles are periodic), leaves the user's box in the plane, or fails to continue.
+Simple branch points are detected by a sign change of det [dG/dz; t^T] between two steps,
+located by bisection, and every branch through them is followed (the second branch starts
+from the branch point along the null direction of dG/dz orthogonal to the first branch).
+Seeds come from sign changes of c on a coarse grid of a closed-form chart of the manifold
+(the platform coordinates with each leg's closed-form inverse, seed 003), refined by Newton;
+the grid only seeds: every point returned is a corrected point of the curve.
+
+For a 1-DoF Khalil mechanism (the four-bar) the curve is the configuration space itself
+(``kind="closure"``, G = Phi) and its bifurcation points are the C-space singularities of
+Modern Robotics 7.3 (seed 001).
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ..errors import MechanismError
+from ..mechanism import Mechanism
+from ..model import get_model
+
+__all__ = ["Curve", "SingularCurves", "singular_curves", "augmented_system"]
+
+TWO_PI = 2.0 * np.pi
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % TWO_PI - np.pi
+
+
+# ---------------------------------------------------------------------------------------
+# the augmented system, built once per (mechanism, condition, fixed variables)
+# ---------------------------------------------------------------------------------------
+
+_SYSTEMS: dict[tuple, _System] = {}
+
+
+class _System:
+    """G(z; p) = [Phi; c] and dG/dz as CasADi Functions; p = the fixed values (+ limit)."""
+
+    def __init__(self, mech: Mechanism, cond: str, fixed_idx: tuple[int, ...]) -> None:
+        model = get_model(mech)
+        self.mech, self.model, self.cond = mech, model, cond
+        na, nx = model.na, model.nx
+        if model.m != nx:
+            raise MechanismError(
+                f"{mech.name}: singular curves need as many closure rows as unknowns x "
+                f"(got {model.m} rows for {nx} unknowns); redundantly actuated or spatial "
+                "quaternion platforms are not supported"
+            )
+        self.na, self.nx, self.nv = na, nx, na + nx
+        self.names = tuple(mech.active_names) + tuple(model.x_names)
+        act_rev = [bool(mech.revolute[i]) for i in np.flatnonzero(np.array(mech.actuated))]
+        self.periodic = np.array(act_rev + list(model.x_angle), dtype=bool)
+        self.scale = np.where(self.periodic, 1.0, model.length)
+        self.fixed_idx = fixed_idx
+        self.free_idx = tuple(i for i in range(self.nv) if i not in fixed_idx)
+        qa, x, phi = model.qa_sym, model.x_sym, model.phi_sym
+        v = ca.vertcat(qa, x)
+        Wp = ca.jacobian(phi, x)
+        Wa = ca.jacobian(phi, qa)
+        lim = ca.SX.sym("lim")
+        if cond == "parallel":
+            c = ca.det(Wp)
+        elif cond.startswith("serial:"):
+            j = int(cond.split(":")[1])
+            c = Wa[j, j]
+        elif cond.startswith("limit:"):
+            j = int(cond.split(":")[1])
+            c = qa[j] - lim
+        elif cond == "closure":
+            c = None
+        else:
+            raise MechanismError(f"unknown singularity kind {cond!r}")
+        rows = phi if c is None else ca.vertcat(phi, c)
+        self.n_rows = int(rows.shape[0])
+        if self.n_rows != len(self.free_idx) - 1:
+            raise MechanismError(
+                f"{mech.name}: {len(self.free_idx)} free variables and {self.n_rows} equations "
+                f"do not make a curve; fix {len(self.free_idx) - 1 - self.n_rows} more "
+                "variable(s) with fixed={name: value} (a 2-D section)"
+            )
+        z = ca.SX.sym("z", len(self.free_idx))
+        p = ca.SX.sym("p", len(fixed_idx))
+        parts = []
+        iz = ip = 0
+        for i in range(self.nv):
+            if i in fixed_idx:
+                parts.append(p[ip])
+                ip += 1
+            else:
+                parts.append(z[iz])
+                iz += 1
+        vv = ca.vertcat(*parts)
+        F = ca.Function("F", [v, lim], [rows])
+        G = F(vv, lim)
+        J = ca.jacobian(G, z)
+        self.GJ = ca.Function("GJ", [z, p, lim], [G, J])
+        self.G = ca.Function("G", [z, p, lim], [G])
+        # one packed input and output: fewer conversions per call in the tracer's loop
+        w = ca.vertcat(z, p, lim)
+        self.nz = len(self.free_idx)
+        self.GJw = ca.Function("GJw", [w], [ca.vertcat(G, ca.vec(J))])
+        # labels of a full point v: det W_p and diag W_a
+        self.aux = ca.Function("aux", [v], [ca.det(Wp), ca.diag(Wa)])
+        self.cfun = None if c is None else ca.Function("c", [v, lim], [c])
+        self._maps: dict[int, Any] = {}
+
+    def c_many(self, V: np.ndarray, lim: float) -> np.ndarray:
+        """c at the columns of V (nv, N)."""
+        n = V.shape[1]
+        f = self._maps.get(n)
+        if f is None:
+            f = self.cfun.map(n)
+            self._maps[n] = f
+        return np.array(f(V, lim)).ravel()
+
+    def aux_many(self, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        n = V.shape[1]
+        key = -n
+        f = self._maps.get(key)
+        if f is None:
+            f = self.aux.map(n)
+            self._maps[key] = f
+        d, b = f(V)
+        return np.array(d).ravel(), np.array(b).reshape(self.na, n)
+
+
+def augmented_system(mech: Mechanism, cond: str = "parallel",
+                     fixed: Sequence[int] = ()) -> _System:
+    """The cached augmented system of ``mech`` (see the module docstring)."""
+    key = (mech.key, cond, tuple(sorted(fixed)))
+    s = _SYSTEMS.get(key)
+    if s is None:
+        s = _System(mech, cond, tuple(sorted(fixed)))
+        _SYSTEMS[key] = s
+    return s
+
+
+# ---------------------------------------------------------------------------------------
+# results
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class Curve:
+    """One traced curve.
+
+    Attributes
+    ----------
+    kind : str
+        ``"parallel"`` (det W_p = 0), ``"serial:j"`` (B_jj = 0, leg j from 0),
+        ``"limit:j"`` (q_a,j at a limit) or ``"closure"`` (the C-space of a 1-DoF chain).
+    v : ndarray (N, nv)
+        The ordered points, all variables (q_a then x), in the order of ``names``.
+    points : ndarray (N, 2)
+        The points in the plane.
+    residual : ndarray (N,)
+        max |G| at every point (the closure rows and the singularity condition).
+    closed : bool
+        The curve closes on itself (angles modulo 2 pi).
+    ends : tuple of str
+        How each end stopped: ``"closed"``, ``"boundary"``, ``"branch"`` or ``"stalled"``.
+    working_mode : ndarray (N, na) of int, or None
+        Signs of the B_jj at every point (leg mechanisms).
+    """
+
+    kind: str
+    v: np.ndarray
+    points: np.ndarray
+    residual: np.ndarray
+    closed: bool
+    ends: tuple[str, str]
+    working_mode: np.ndarray | None = None
+    det_Wp: np.ndarray | None = None
+    B: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.v)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "n_points": len(self.v), "closed": self.closed,
+                "ends": list(self.ends), "max_residual": float(np.max(self.residual)),
+                "points": self.points.tolist()}
+
+
+@dataclass
+class SingularCurves:
+    """The singular loci of a mechanism in a plane (see :func:`singular_curves`)."""
+
+    mechanism: str
+    names: tuple[str, ...]
+    plane: tuple[str, str]
+    fixed: dict[str, float]
+    curves: list[Curve]
+    branch_points: np.ndarray
+    cusps: np.ndarray
+    success: bool
+    status: str
+    message: str
+    bounds: np.ndarray
+    periodic: tuple[bool, bool]
+    n_seeds: int = 0
+    time: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def count(self) -> int:
+        return len(self.curves)
+
+    @property
+    def max_residual(self) -> float:
+        return float(max((np.max(c.residual) for c in self.curves), default=0.0))
+
+    def __len__(self) -> int:
+        return len(self.curves)
+
+    def __iter__(self):
+        return iter(self.curves)
+
+    def of_kind(self, prefix: str) -> list[Curve]:
+        return [c for c in self.curves if c.kind.startswith(prefix)]
+
+    def polylines(self, kind: str | None = None) -> list[np.ndarray]:
+        """Plane polylines, split where a periodic coordinate wraps (for drawing)."""
+        out = []
+        for c in self.curves:
+            if kind is not None and not c.kind.startswith(kind):
+                continue
+            out += _split_wrapped(c.points, self.periodic)
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        kinds: dict[str, int] = {}
+        for c in self.curves:
+            k = c.kind.split(":")[0]
+            kinds[k] = kinds.get(k, 0) + 1
+        return {
+            "mechanism": self.mechanism, "plane": list(self.plane), "fixed": self.fixed,
+            "success": self.success, "status": self.status, "message": self.message,
+            "count": self.count, "counts": kinds, "n_points": int(sum(len(c) for c in self.curves)),
+            "max_residual": self.max_residual,
+            "n_branch_points": int(len(self.branch_points)),
+            "branch_points": self.branch_points.tolist(),
+            "n_cusps": int(len(self.cusps)), "cusps": self.cusps.tolist(),
+            "time": self.time, "n_seeds": self.n_seeds,
+            "curves": [c.to_dict() for c in self.curves],
+        }
+
+    def plot(self, path: str | None = None, ax: Any = None, title: str | None = None) -> Any:
+        """Draw the curves in the plane (PNG when ``path`` is given)."""
+        from .aspects import _plot_curves
+
+        return _plot_curves(self, path, ax, title)
+
+
+def _split_wrapped(P: np.ndarray, periodic: tuple[bool, bool]) -> list[np.ndarray]:
+    P = np.array(P, dtype=float)
+    for k in range(2):
+        if periodic[k]:
+            P[:, k] = _wrap(P[:, k])
+    if len(P) < 2:
+        return [P]
+    jump = np.zeros(len(P) - 1, dtype=bool)
+    for k in range(2):
+        if periodic[k]:
+            jump |= np.abs(np.diff(P[:, k])) > np.pi
+    cuts = np.flatnonzero(jump) + 1
+    return [s for s in np.split(P, cuts) if len(s) > 1]
+
+
+# ---------------------------------------------------------------------------------------
+# the tracer
+# ---------------------------------------------------------------------------------------
+
+
+class _Tracer:
+    def __init__(self, sys: _System, pvals: np.ndarray, lim: float, plane_idx: tuple[int, int],
+                 bounds: np.ndarray, hmax: float, tol: float, max_steps: int) -> None:
+        self.sys = sys
+        self.p = pvals
+        self.lim = lim
+        self.free = np.array(sys.free_idx)
+        self.per = sys.periodic[self.free]
+        self.scl = sys.scale[self.free]
+        # plane coordinates as indices into z
+        self.pz = [int(np.flatnonzero(self.free == i)[0]) for i in plane_idx]
+        self.bounds = bounds
+        self.box_periodic = [bool(self.per[k]) and bounds[j][1] - bounds[j][0] >= TWO_PI - 1e-9
+                             for j, k in enumerate(self.pz)]
+        self.hmax = hmax
+        self.hmin = hmax * 1e-4
+        self.tol = tol
+        self.max_steps = max_steps
+        self.curves_z: list[np.ndarray] = []
+        self.bps: list[np.ndarray] = []
+        self.bp_dirs: list[np.ndarray] = []
+
+    # scaled evaluation ------------------------------------------------------------
+    def GJ(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        out = self.sys.GJw(np.concatenate([u * self.scl, self.p, [self.lim]])).full().ravel()
+        m = self.sys.n_rows
+        g = out[:m]
+        J = out[m:].reshape(self.sys.nz, m).T * self.scl
+        return g, J
+
+    def tangent(self, J: np.ndarray) -> np.ndarray:
+        _, _, vt = np.linalg.svd(J)
+        return vt[-1]
+
+    def diff(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """a - b with periodic coordinates wrapped."""
+        d = a - b
+        d[self.per] = _wrap(d[self.per])
+        return d
+
+    def newton_free(self, u: np.ndarray, iters: int = 30) -> tuple[np.ndarray, bool]:
+        """Min-norm Newton onto G = 0 (seeds)."""
+        for _ in range(iters):
+            g, J = self.GJ(u)
+            if np.max(np.abs(g)) < self.tol:
+                return u, True
+            du = np.linalg.lstsq(J, -g, rcond=None)[0]
+            n = np.linalg.norm(du)
+            if n > 0.5:
+                du *= 0.5 / n
+            u = u + du
+        g, _ = self.GJ(u)
+        return u, bool(np.max(np.abs(g)) < self.tol)
+
+    def correct(self, up: np.ndarray, t: np.ndarray, anchor: np.ndarray | None = None,
+                iters: int = 10) -> tuple[np.ndarray | None, int]:
+        """Newton on [G; t.(u - anchor)] = 0 from the prediction up."""
+        a = up if anchor is None else anchor
+        u = up.copy()
+        for k in range(iters):
+            g, J = self.GJ(u)
+            F = np.append(g, t @ (u - a))
+            if np.max(np.abs(g)) < self.tol and abs(F[-1]) < 1e-10:
+                self.last_J = J
+                return u, k
+            M = np.vstack([J, t])
+            try:
+                du = np.linalg.solve(M, -F)
+            except np.linalg.LinAlgError:
+                return None, k
+            u = u + du
+            if np.linalg.norm(du) > 4 * self.hmax:
+                return None, k
+        g, J = self.GJ(u)
+        if np.max(np.abs(g)) < self.tol:
+            self.last_J = J
+            return u, iters
+        return None, iters
+
+    def in_box(self, u: np.ndarray) -> bool:
+        for j, k in enumerate(self.pz):
+            if self.box_periodic[j]:
+                continue
+            val = u[k] * self.scl[k]
+            lo, hi = self.bounds[j]
+            if self.per[k]:
+                # angle boxes narrower than 2 pi: compare the wrapped value
+                val = lo + (val - lo) % TWO_PI
+            if val < lo or val > hi:
+                return False
+        return True
+
+    def near_known(self, u: np.ndarray, thr: float) -> bool:
+        for Z in self.curves_z:
+            if _dist_to_polyline(u, Z, self.per) < thr:
+                return True
+        return False
+
+    def aug_det(self, J: np.ndarray, t: np.ndarray) -> float:
+        return float(np.linalg.det(np.vstack([J, t])))
+
+    # one direction -------------------------------------------------------------
+    def run(self, u0: np.ndarray, t0: np.ndarray, stop_at_bps: bool,
+            start_bp: int | None = None) -> tuple[list[np.ndarray], str]:
+        pts = [u0]
+        u, t = u0, t0
+        _, J = self.GJ(u)
+        d_prev = self.aug_det(J, t)
+        h = self.hmax * 0.25
+        arc = 0.0
+        for _ in range(self.max_steps):
+            up = u + h * t
+            un, nit = self.correct(up, t)
+            if un is None:
+                h *= 0.5
+                if h < self.hmin:
+                    return pts, "stalled"
+                continue
+            Jn = self.last_J
+            tn = self.tangent(Jn)
+            if tn @ t < 0:
+                tn = -tn
+            step = np.linalg.norm(un - u)
+            if tn @ t < np.cos(0.25) or step > 2 * h:
+                h *= 0.5
+                if h < self.hmin:
+                    return pts, "stalled"
+                continue
+            d_new = self.aug_det(Jn, tn)
+            if d_prev * d_new < 0:
+                self._branch_point(u, t, un, tn)
+            d_prev = d_new
+            if not self.in_box(un):
+                ub = self._to_boundary(u, un)
+                if ub is not None:
+                    pts.append(ub)
+                return pts, "boundary"
+            pts.append(un)
+            arc += step
+            # closure
+            if arc > 3 * h and np.linalg.norm(self.diff(un, u0)) < 1.2 * max(h, step):
+                return pts, "closed"
+            if stop_at_bps and arc > 2 * h:
+                for ib, b in enumerate(self.bps):
+                    if ib == start_bp and arc < 4 * self.hmax:
+                        continue
+                    if np.linalg.norm(self.diff(un, b)) < 0.6 * max(h, step):
+                        pts.append(b.copy())
+                        return pts, "branch"
+            u, t = un, tn
+            if nit <= 3:
+                h = min(h * 1.5, self.hmax)
+            elif nit >= 6:
+                h *= 0.7
+        return pts, "max_steps"
+
+    def _to_boundary(self, u_in: np.ndarray, u_out: np.ndarray) -> np.ndarray | None:
+        """The curve point on the box edge between an inside and an outside point."""
+        for j, k in enumerate(self.pz):
+            if self.box_periodic[j]:
+                continue
+            lo, hi = self.bounds[j]
+            a, b = u_in[k] * self.scl[k], u_out[k] * self.scl[k]
+            for edge in (lo, hi):
+                if (a - edge) * (b - edge) <= 0 and a != b:
+                    s = (edge - a) / (b - a)
+                    ug = u_in + s * (u_out - u_in)
+                    e = np.zeros_like(ug)
+                    e[k] = 1.0
+                    ub, _ = self.correct(ug, e, anchor=ug)
+                    if ub is not None:
+                        return ub
+        return None
+
+    def _branch_point(self, ua, ta, ub, tb) -> None:
+        """Locate a branch point between ua and ub (bisection on the augmented det)."""
+        _, Ja = self.GJ(ua)
+        da = self.aug_det(Ja, ta)
+        lo, hi = 0.0, 1.0
+        d = ub - ua
+        dn = d / np.linalg.norm(d)
+        best = None
+        for _ in range(40):
+            s = 0.5 * (lo + hi)
+            um, _ = self.correct(ua + s * d, dn)
+            if um is None:
+                break
+            _, Jm = self.GJ(um)
+            tm = self.tangent(Jm)
+            if tm @ ta < 0:
+                tm = -tm
+            dm = self.aug_det(Jm, tm)
+            best = um
+            if dm * da > 0:
+                lo = s
+            else:
+                hi = s
+            if (hi - lo) * np.linalg.norm(d) < 1e-10:
+                break
+        if best is None:
+            return
+        for b in self.bps:
+            if np.linalg.norm(self.diff(best, b)) < 1e-6:
+                return
+        self.bps.append(best)
+        self.bp_dirs.append(dn)
+
+    def branch_seeds(self, ib: int) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Start points on the other branch(es) through branch point ib."""
+        b, t1 = self.bps[ib], self.bp_dirs[ib]
+        _, J = self.GJ(b)
+        _, _, vt = np.linalg.svd(J)
+        N = vt[-2:]  # the 2-D null space at a simple branch point
+        c = N @ t1
+        tp = N.T @ np.array([-c[1], c[0]])
+        tp /= np.linalg.norm(tp)
+        out = []
+        for h in (0.05 * self.hmax, 0.2 * self.hmax):
+            for s in (1.0, -1.0):
+                ug = b + s * h * tp
+                u, _ = self.correct(ug, tp, anchor=ug)
+                if u is not None and np.linalg.norm(self.diff(u, b)) > 0.3 * h:
+                    out.append((u, s * tp))
+            if out:
+                break
+        return out
+
+
+def _dist_to_polyline(u: np.ndarray, Z: np.ndarray, per: np.ndarray) -> float:
+    if len(Z) == 0:
+        return np.inf
+    D = Z - u
+    D[:, per] = _wrap(D[:, per])
+    if len(Z) == 1:
+        return float(np.linalg.norm(D[0]))
+    a = D[:-1]
+    seg = np.diff(Z, axis=0)
+    seg[:, per] = _wrap(seg[:, per])
+    L2 = np.einsum("ij,ij->i", seg, seg)
+    s = np.clip(-np.einsum("ij,ij->i", a, seg) / np.where(L2 > 0, L2, 1), 0, 1)
+    e = a + s[:, None] * seg
+    return float(np.sqrt(np.min(np.einsum("ij,ij->i", e, e))))
+
+
+def _trace_all(tr: _Tracer, seeds: list[np.ndarray], dedup: float) -> list[tuple[np.ndarray, bool, tuple[str, str]]]:
+    """Trace every seed not already on a curve, and every branch through every branch point."""
+    out = []
+    done_bps = 0
+    queue: list[tuple[np.ndarray, np.ndarray | None, int | None]] = [(s, None, None) for s in seeds]
+    while queue or done_bps < len(tr.bps):
+        if not queue:
+            ib = done_bps
+            done_bps += 1
+            for u, tp in tr.branch_seeds(ib):
+                if not tr.near_known(u, 0.2 * np.linalg.norm(tr.diff(u, tr.bps[ib]))):
+                    queue.append((u, tp, ib))
+            continue
+        u0, tdir, ib = queue.pop(0)
+        if ib is None:
+            # a raw grid seed: skip it when it is already near a traced curve, else correct it
+            if tr.near_known(u0, 2 * dedup):
+                continue
+            u0, ok = tr.newton_free(u0)
+            if not ok or not tr.in_box(u0) or tr.near_known(u0, dedup):
+                continue
+        elif tr.near_known(u0, 1e-3 * tr.hmax):
+            continue
+        _, J = tr.GJ(u0)
+        t0 = tr.tangent(J)
+        if tdir is not None and t0 @ tdir < 0:
+            t0 = -t0
+        if ib is not None:
+            # from a branch point: go outwards only, then back to the branch point
+            fwd, end1 = tr.run(u0, t0, True, ib)
+            bwd, end2 = [tr.bps[ib].copy()], "branch"
+            if end1 == "closed":
+                end2 = "closed"
+            Z = np.array(bwd + fwd)
+        else:
+            fwd, end1 = tr.run(u0, t0, True)
+            if end1 == "closed":
+                Z, end2 = np.array(fwd), "closed"
+            else:
+                bwd, end2 = tr.run(u0, -t0, True)
+                Z = np.array(bwd[::-1] + fwd[1:])
+        closed = end1 == "closed"
+        tr.curves_z.append(Z)
+        out.append((Z, closed, (end2, end1)))
+    return out
+
+
+# ---------------------------------------------------------------------------------------
+# seeds from closed-form charts of the configuration manifold
+# ---------------------------------------------------------------------------------------
+
+
+def _rot(phi):
+    return np.cos(phi), np.sin(phi)
+
+
+def _leg_ik(leg, P: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(q_a values, valid) per posture of a planar leg for platform points P (N, 2)."""
+    A = leg.base[:2]
+    d = P - A
+    L = np.hypot(d[:, 0], d[:, 1])
+    if leg.type == "RPR":
+        return [(L, L > 1e-9)]
+    if leg.type == "RRR":
+        l1, l2 = leg.lengths
+        with np.errstate(divide="ignore", invalid="ignore"):
+            c = (L * L + l1 * l1 - l2 * l2) / (2 * L * l1)
+        ok = (np.abs(c) <= 1) & (L > 1e-12)
+        beta = np.arccos(np.clip(np.nan_to_num(c), -1, 1))
+        a = np.arctan2(d[:, 1], d[:, 0])
+        return [(_wrap(a + beta), ok), (_wrap(a - beta), ok)]
+    raise MechanismError(f"singular curves: leg type {leg.type} is not planar")
+
+
+def _platform_points(mech: Mechanism, X: np.ndarray) -> list[np.ndarray]:
+    """Each leg's platform point for platform coordinates X (N, nx)."""
+    out = []
+    for leg in mech.legs:
+        b = leg.platform[:2]
+        if mech.platform == "planar":
+            c, s = _rot(X[:, 2])
+            out.append(np.stack([X[:, 0] + c * b[0] - s * b[1], X[:, 1] + s * b[0] + c * b[1]], 1))
+        else:
+            out.append(X[:, :2] + b)
+    return out
+
+
+def _full_from_x(mech: Mechanism, X: np.ndarray, fixed_leg: int | None = None,
+                 fixed_val: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Full points V (N, nv) and validity for every posture combination of the legs."""
+    Ps = _platform_points(mech, X)
+    per_leg = []
+    for k, leg in enumerate(mech.legs):
+        if k == fixed_leg:
+            per_leg.append([(fixed_val, np.ones(len(X), dtype=bool))])
+        else:
+            per_leg.append(_leg_ik(leg, Ps[k]))
+    out = []
+    for combo in itertools.product(*per_leg):
+        Q = np.stack([c[0] for c in combo], 1)
+        ok = np.logical_and.reduce([c[1] for c in combo])
+        out.append((np.hstack([Q, X]), ok))
+    return out
+
+
+def _reach_box(mech: Mechanism) -> np.ndarray:
+    los, his = [], []
+    for leg in mech.legs:
+        r = sum(leg.lengths) if leg.type == "RRR" else 2.0 * get_model(mech).length
+        r += float(np.hypot(*leg.platform[:2]))
+        los.append(leg.base[:2] - r)
+        his.append(leg.base[:2] + r)
+    lo = np.max(los, axis=0)
+    hi = np.min(his, axis=0)
+    return np.array([[lo[0], hi[0]], [lo[1], hi[1]]])
+
+
+def _seeds_legs(sys: _System, cond: str, fixed: dict[int, float], lim: float, n: int,
+                bounds_full: dict[int, tuple[float, float]]) -> list[np.ndarray]:
+    """Seed points (full v) for a curve kind of a planar leg mechanism."""
+    mech = sys.mech
+    na, nx = sys.na, sys.nx
+    fixed_qa = [i for i in fixed if i < na]
+    fixed_x = {i - na: v for i, v in fixed.items() if i >= na}
+    free_x = [j for j in range(nx) if j not in fixed_x]
+
+    def xbox(j):
+        if na + j in bounds_full:
+            return bounds_full[na + j]
+        if mech.platform == "planar" and j == 2:
+            return (-np.pi, np.pi)
+        return tuple(_reach_box(mech)[j])
+
+    pin_leg = None
+    pin_kind = None
+    if cond.startswith("serial:") or cond.startswith("limit:"):
+        pin_leg = int(cond.split(":")[1])
+        pin_kind = cond.split(":")[0]
+    if fixed_qa:
+        if pin_leg is not None or len(fixed_qa) > 1:
+            return []
+        pin_leg, pin_kind = fixed_qa[0], "fixed"
+    seeds: list[np.ndarray] = []
+    if pin_leg is None:
+        # 2-D chart over the free platform coordinates; sign changes of c
+        if len(free_x) != 2:
+            return []
+        g = [np.linspace(*xbox(j), n) for j in free_x]
+        G0, G1 = np.meshgrid(g[0], g[1], indexing="ij")
+        X = np.zeros((G0.size, nx))
+        for j, val in fixed_x.items():
+            X[:, j] = val
+        X[:, free_x[0]] = G0.ravel()
+        X[:, free_x[1]] = G1.ravel()
+        for V, ok in _full_from_x(mech, X):
+            seeds += _sign_change_seeds(sys, V, ok, (n, n), lim)
+        return seeds
+    # a pinned leg: its platform point moves on a circle (fixed joint / limit) or on the
+    # outstretched / folded circle (serial singularity of the leg)
+    leg = mech.legs[pin_leg]
+    A = leg.base[:2]
+    if mech.platform == "planar" and len(free_x) == 3:
+        # planar platform with only the pinned leg's constraint: chart (psi, phi)
+        if pin_kind != "fixed":
+            return []
+        val = fixed[pin_leg]
+        psi = np.linspace(-np.pi, np.pi, n, endpoint=False)
+        ph = np.linspace(*xbox(2), n)
+        PS, PH = np.meshgrid(psi, ph, indexing="ij")
+        PS, PH = PS.ravel(), PH.ravel()
+        if leg.type == "RPR":
+            P = A + val * np.stack([np.cos(PS), np.sin(PS)], 1)
+        else:
+            l1, l2 = leg.lengths
+            P = A + l1 * np.array([np.cos(val), np.sin(val)]) + l2 * np.stack([np.cos(PS), np.sin(PS)], 1)
+        b = leg.platform[:2]
+        c, s = _rot(PH)
+        X = np.stack([P[:, 0] - (c * b[0] - s * b[1]), P[:, 1] - (s * b[0] + c * b[1]), PH], 1)
+        for V, ok in _full_from_x(mech, X, pin_leg, np.full(len(X), val)):
+            seeds += _sign_change_seeds(sys, V, ok, (n, n), lim, wrap_axis0=True)
+        return seeds
+    # 1-D chart: the pinned relation leaves one parameter; points lie on the curve
+    m = 4 * n
+    th = np.linspace(-np.pi, np.pi, m, endpoint=False)
+    cands = []
+    if pin_kind == "serial":
+        if leg.type != "RRR":
+            return []
+        l1, l2 = leg.lengths
+        for r in (l1 + l2, l1 - l2):
+            cands.append((A + r * np.stack([np.cos(th), np.sin(th)], 1), th))
+    else:
+        val = lim if pin_kind == "limit" else fixed[pin_leg]
+        if leg.type == "RPR":
+            cands.append((A + val * np.stack([np.cos(th), np.sin(th)], 1), np.full(m, val)))
+        else:
+            l1, l2 = leg.lengths
+            C = A + l1 * np.array([np.cos(val), np.sin(val)])
+            cands.append((C + l2 * np.stack([np.cos(th), np.sin(th)], 1), np.full(m, val)))
+    b = leg.platform[:2]
+    for P, qk in cands:
+        X = np.zeros((m, nx))
+        for j, v in fixed_x.items():
+            X[:, j] = v
+        if mech.platform == "planar":
+            phv = X[:, 2]
+            c, s = _rot(phv)
+            X[:, 0] = P[:, 0] - (c * b[0] - s * b[1])
+            X[:, 1] = P[:, 1] - (s * b[0] + c * b[1])
+        else:
+            X[:, :2] = P - b
+        for V, ok in _full_from_x(mech, X, pin_leg, qk):
+            seeds += [V[i] for i in np.flatnonzero(ok)[::2]]
+    return seeds
+
+
+def _sign_change_seeds(sys: _System, V: np.ndarray, ok: np.ndarray, shape: tuple[int, int],
+                       lim: float, wrap_axis0: bool = False) -> list[np.ndarray]:
+    c = np.full(len(V), np.nan)
+    if ok.any():
+        c[ok] = sys.c_many(V[ok].T, lim)
+    C = c.reshape(shape)
+    Vg = V.reshape(shape + (V.shape[1],))
+    out = []
+    per = sys.periodic
+    for axis in (0, 1):
+        if axis == 0:
+            a, b = C[:-1], C[1:]
+            va, vb = Vg[:-1], Vg[1:]
+            if wrap_axis0:
+                a, b = C, np.roll(C, -1, axis=0)
+                va, vb = Vg, np.roll(Vg, -1, axis=0)
+        else:
+            a, b = C[:, :-1], C[:, 1:]
+            va, vb = Vg[:, :-1], Vg[:, 1:]
+        hit = np.isfinite(a) & np.isfinite(b) & (a * b < 0)
+        for idx in zip(*np.nonzero(hit)):
+            ca_, cb_ = a[idx], b[idx]
+            s = ca_ / (ca_ - cb_)
+            d = vb[idx] - va[idx]
+            d[per] = _wrap(d[per])
+            out.append(va[idx] + s * d)
+    return out
+
+
+def _seeds_khalil(sys: _System, fixed: dict[int, float], n: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """C-space seeds of a 1-DoF chain: a grid over q_a, multi-start Newton on the passives."""
+    model = sys.model
+    if sys.na != 1 or fixed:
+        return []
+    seeds = []
+    starts = rng.uniform(-np.pi, np.pi, (6, model.nx)) * model.x_scale
+    for qa in np.linspace(-np.pi, np.pi, n, endpoint=False):
+        for x0 in starts:
+            x = x0.copy()
+            for _ in range(40):
+                xn, r = model.step(np.array([qa]), x)
+                x = np.array(xn).ravel()
+                if float(r) < 1e-10:
+                    break
+            if np.max(np.abs(model.residual(np.array([qa]), x))) < 1e-8:
+                seeds.append(np.concatenate([[qa], x]))
+    return seeds
+
+
+# ---------------------------------------------------------------------------------------
+# public entry point
+# ---------------------------------------------------------------------------------------
+
+
+def _resolve_names(mech: Mechanism, sysnames: Sequence[str], items: Any, what: str) -> list[int]:
+    out = []
+    for it in items:
+        if isinstance(it, (int, np.integer)):
+            out.append(int(it))
+        elif it in sysnames:
+            out.append(sysnames.index(it))
+        else:
+            raise MechanismError(
+                f"{what}: unknown coordinate {it!r} of {mech.name}; known: {', '.join(sysnames)}"
+            )
+    return out
+
+
+def _names_of(mech: Mechanism) -> tuple[str, ...]:
+    return tuple(mech.active_names) + tuple(get_model(mech).x_names)
+
+
+def plane_indices(mech: Mechanism, plane: Any, fixed_idx: Sequence[int]) -> tuple[int, int]:
+    """Indices (into v = (q_a, x)) of the plane's two coordinates."""
+    model = get_model(mech)
+    names = _names_of(mech)
+    na = model.na
+    if isinstance(plane, str):
+        if plane in ("joint", "joints", "qa", "joint_space"):
+            cand = [i for i in range(na) if i not in fixed_idx]
+        elif plane in ("workspace", "task", "x", "cartesian"):
+            cand = [na + j for j in range(model.nx) if na + j not in fixed_idx
+                    and model.x_names[j] != "phi"]
+            if len(cand) < 2:
+                cand = [na + j for j in range(model.nx) if na + j not in fixed_idx]
+        else:
+            raise MechanismError(
+                f"plane: expected 'joint', 'workspace' or two coordinate names, got {plane!r}")
+        if mech.kind == "khalil" and plane in ("joint", "joints", "qa", "joint_space") and len(cand) < 2:
+            cand = cand + [i for i in range(na, na + model.nx) if i not in fixed_idx]
+        if len(cand) < 2:
+            raise MechanismError(
+                f"plane {plane!r} of {mech.name} has {len(cand)} free coordinate(s); name two "
+                f"coordinates, e.g. plane=({names[0]!r}, {names[-1]!r})")
+        return cand[0], cand[1]
+    idx = _resolve_names(mech, names, plane, "plane")
+    if len(idx) != 2:
+        raise MechanismError(f"plane: expected two coordinates, got {plane!r}")
+    return idx[0], idx[1]
+
+
+def singular_curves(
+    mech: Mechanism,
+    plane: Any = "joint",
+    kind: str | Sequence[str] = "parallel",
+    fixed: Mapping[str, float] | None = None,
+    bounds: Any = None,
+    grid: int | None = None,
+    limits: Mapping[str, tuple[float, float]] | None = None,
+    step: float | None = None,
+    tol: float = 1e-11,
+    max_steps: int = 20000,
+    cusps: bool | None = None,
+) -> SingularCurves:
+    """Trace the singular loci of a mechanism in a plane by pseudo-arclength continuation.
+
+    Parameters
+    ----------
+    mech : Mechanism
+        A planar leg mechanism (RPR/RRR legs; 2-DoF, or 3-DoF with one coordinate fixed)
+        or a 1-DoF Khalil mechanism (``kind="closure"``: its C-space curve).
+    plane : "joint", "workspace" or (name, name)
+        The plane the curves are shown in: the actuated joints q_a, the platform
+        coordinates, or any two coordinates of v = (q_a, x). The curves themselves live
+        in the configuration manifold; the plane only projects them (and bounds them).
+    kind : str or list of str
+        ``"parallel"`` (det W_p = det A = 0), ``"serial"`` (every B_jj = 0), ``"limit"``
+        (the joint-limit boundaries of ``limits``), ``"closure"`` (1-DoF C-space), or
+        ``"all"`` (parallel + serial + limit).
+    fixed : dict, optional
+        Section values, e.g. ``{"phi": 0.3}`` or ``{"L1.rho": 17.0}`` for a 3-DoF mechanism.
+    bounds : [[lo, hi], [lo, hi]], optional
+        A box in the plane; curves stop on it (angles are periodic when their range is
+        2 pi, the default). Default: the reach of the legs, [-pi, pi] for angles.
+    grid : int, optional
+        Seeding grid size per chart axis (default 32); it only seeds the continuation.
+    limits : dict name -> (lo, hi), optional
+        Actuated joint limits (for ``kind="limit"``).
+    step : float, optional
+        Largest continuation step in scaled units (lengths / mechanism size, radians);
+        default 0.05.
+    tol : float
+        Corrector tolerance on max |G|.
+    cusps : bool, optional
+        Detect cusps of the parallel curves in the plane (default: when the plane is the
+        joint space of a section).
+
+    Returns
+    -------
+    SingularCurves
+        ``curves`` (ordered points with residuals), ``branch_points`` (full v) and
+        ``cusps`` (plane points), ``success``/``status``/``message``.
+    """
+    t0 = time.perf_counter()
+    if not isinstance(mech, Mechanism):
+        raise MechanismError(f"expected an optkin Mechanism, got {type(mech).__name__}")
+    model = get_model(mech)
+    names = _names_of(mech)
+    fixed = dict(fixed or {})
+    fixed_idx_l = _resolve_names(mech, names, list(fixed), "fixed")
+    fixed_map = {i: float(fixed[k]) for i, k in zip(fixed_idx_l, fixed)}
+    fixed_idx = tuple(sorted(fixed_map))
+    pidx = plane_indices(mech, plane, fixed_idx)
+    if any(i in fixed_idx for i in pidx):
+        raise MechanismError("plane: a plane coordinate cannot also be fixed")
+    kinds: list[str] = [kind] if isinstance(kind, str) else list(kind)
+    if "all" in kinds:
+        kinds = ["parallel", "serial", "limit"]
+    if mech.kind == "khalil" and model.na == 1 and kinds == ["parallel"]:
+        kinds = ["closure"]
+    na = model.na
+    conds: list[tuple[str, float]] = []
+    limits = dict(limits or {})
+    lim_idx = _resolve_names(mech, names, list(limits), "limits")
+    for k in kinds:
+        if k == "serial":
+            if mech.kind != "legs":
+                raise MechanismError("kind='serial': serial curves (B_jj = 0) need a leg mechanism")
+            conds += [(f"serial:{j}", 0.0) for j in range(na) if j not in fixed_idx]
+        elif k == "limit":
+            for i, key in zip(lim_idx, limits):
+                if i >= na:
+                    raise MechanismError(f"limits: {key!r} is not an actuated joint")
+                lo, hi = limits[key]
+                conds += [(f"limit:{i}", float(lo)), (f"limit:{i}", float(hi))]
+        elif k in ("parallel", "closure"):
+            conds.append((k, 0.0))
+        else:
+            raise MechanismError(
+                f"kind: expected 'parallel', 'serial', 'limit', 'closure' or 'all', got {k!r}")
+    if mech.kind == "legs" and (not mech.planar or any(leg.type not in ("RPR", "RRR") for leg in mech.legs)):
+        raise MechanismError(
+            f"{mech.name}: singular curves support planar RPR/RRR leg mechanisms and 1-DoF "
+            "Khalil mechanisms in this version")
+    n = int(grid or 32)
+    hmax = float(step or 0.05)
+    # plane bounds
+    per2 = (bool(model.x_angle[pidx[0] - na]) if pidx[0] >= na else bool(mech.revolute[np.flatnonzero(np.array(mech.actuated))[pidx[0]]]),
+            bool(model.x_angle[pidx[1] - na]) if pidx[1] >= na else bool(mech.revolute[np.flatnonzero(np.array(mech.actuated))[pidx[1]]]))
+    if bounds is None:
+        bx = []
+        rb = _reach_box(mech) if mech.kind == "legs" else None
+        for j, i in enumerate(pidx):
+            if per2[j]:
+                bx.append((-np.pi, np.pi))
+            elif i >= na and rb is not None and i - na < 2:
+                lo, hi = rb[i - na]
+                pad = 0.05 * (hi - lo)
+                bx.append((lo - pad, hi + pad))
+            else:
+                bx.append((0.0, 3.0 * model.length))
+        bounds_arr = np.array(bx, dtype=float)
+    else:
+        bounds_arr = np.asarray(bounds, dtype=float).reshape(2, 2)
+    bounds_full = {pidx[0]: tuple(bounds_arr[0]), pidx[1]: tuple(bounds_arr[1])}
+    rng = np.random.default_rng(0)
+    curves: list[Curve] = []
+    bps: list[np.ndarray] = []
+    n_seeds = 0
+    messages = []
+    pvals = np.array([fixed_map[i] for i in fixed_idx])
+    for cond, lim in conds:
+        sys = augmented_system(mech, cond, fixed_idx)
+        if mech.kind == "legs":
+            seeds_v = _seeds_legs(sys, cond, fixed_map, lim, n, bounds_full)
+        else:
+            seeds_v = _seeds_khalil(sys, fixed_map, n, rng)
+        tr = _Tracer(sys, pvals, lim, pidx, bounds_arr, hmax, tol, max_steps)
+        free = np.array(sys.free_idx)
+        seeds_u = [v[free] / tr.scl for v in seeds_v]
+        n_seeds += len(seeds_u)
+        if not seeds_u:
+            messages.append(f"{cond}: no seed found")
+        traced = _trace_all(tr, seeds_u, dedup=0.3 * hmax)
+        for Z, closed, ends in traced:
+            U = Z * tr.scl
+            V = np.empty((len(U), sys.nv))
+            V[:, list(sys.free_idx)] = U
+            for i in fixed_idx:
+                V[:, i] = fixed_map[i]
+            gm = sys.G.map(len(U))(U.T, pvals, lim)
+            res = np.max(np.abs(np.array(gm)), axis=0).ravel()
+            detw, B = sys.aux_many(V.T)
+            wm = np.sign(B.T).astype(int) if mech.kind == "legs" else None
+            curves.append(Curve(cond, V, V[:, list(pidx)], res, closed, ends, wm, detw, B.T))
+        for b in tr.bps:
+            vb = np.empty(sys.nv)
+            vb[list(sys.free_idx)] = b * tr.scl
+            for i in fixed_idx:
+                vb[i] = fixed_map[i]
+            bps.append(vb)
+    # cusps of the parallel curves in the plane
+    do_cusps = cusps if cusps is not None else (bool(fixed_idx) and all(i < na for i in pidx))
+    cusp_pts = np.zeros((0, model.na + model.nx))
+    if do_cusps:
+        found = []
+        for c in curves:
+            if c.kind == "parallel":
+                sys = augmented_system(mech, "parallel", fixed_idx)
+                tr = _Tracer(sys, pvals, 0.0, pidx, bounds_arr, hmax, tol, max_steps)
+                found += _cusps_on(tr, c, pidx, fixed_idx, fixed_map)
+        if found:
+            cusp_pts = np.array(found)
+    maxres = max((float(np.max(c.residual)) for c in curves), default=0.0)
+    ok = bool(curves) and maxres < 1e-9
+    status = "ok" if ok else ("no_curves" if not curves else "inaccurate")
+    msg = f"{len(curves)} curve(s), {len(bps)} branch point(s), max residual {maxres:.1e}"
+    if messages:
+        msg += "; " + "; ".join(messages)
+    if any("max_steps" in c.ends or "stalled" in c.ends for c in curves):
+        msg += "; some curves stopped early (stalled or max_steps)"
+    per_plane = tuple(bool(p and (b[1] - b[0]) >= TWO_PI - 1e-9) for p, b in zip(per2, bounds_arr))
+    return SingularCurves(
+        mechanism=mech.name, names=names, plane=(names[pidx[0]], names[pidx[1]]),
+        fixed={names[i]: fixed_map[i] for i in fixed_idx}, curves=curves,
+        branch_points=np.array(bps).reshape(-1, len(names)),
+        cusps=cusp_pts, success=ok, status=status, message=msg, bounds=bounds_arr,
+        periodic=per_plane, n_seeds=n_seeds, time=time.perf_counter() - t0,
+        info={"plane_index": pidx, "conditions": [c for c, _ in conds]},
+    )
+
+
+def _cusps_on(tr: _Tracer, c: Curve, pidx, fixed_idx, fixed_map) -> list[np.ndarray]:
+    """Cusps of the plane projection: the projected tangent reverses along the curve."""
+    free = np.array(tr.sys.free_idx)
+    U = c.v[:, free] / tr.scl
+    pz = tr.pz
+    T = []
+    for u in U:
+        _, J = tr.GJ(u)
+        T.append(tr.tangent(J))
+    T = np.array(T)
+    for i in range(1, len(T)):  # orient by continuity
+        if T[i] @ T[i - 1] < 0:
+            T[i] = -T[i]
+    P = T[:, pz]
+    out = []
+    for i in range(len(U) - 1):
+        if P[i] @ P[i + 1] >= 0:
+            continue
+        ref = P[i].copy()
+        ua, ub = U[i], U[i + 1]
+        d = tr.diff(ub, ua)
+        dn = d / np.linalg.norm(d)
+        lo, hi = 0.0, 1.0
+        best = None
+        for _ in range(60):
+            s = 0.5 * (lo + hi)
+            um, _ = tr.correct(ua + s * d, dn)
+            if um is None:
+                break
+            _, J = tr.GJ(um)
+            t = tr.tangent(J)
+            if t @ T[i] < 0:
+                t = -t
+            best = um
+            if t[pz] @ ref > 0:
+                lo = s
+            else:
+                hi = s
+            if (hi - lo) * np.linalg.norm(d) < 1e-12:
+                break
+        if best is None:
+            continue
+        v = np.empty(tr.sys.nv)
+        v[free] = best * tr.scl
+        for k in fixed_idx:
+            v[k] = fixed_map[k]
+        if not any(np.linalg.norm(v - o) < 1e-6 for o in out):
+            out.append(v)
+    return out

@@ -1,0 +1,296 @@
+"""Faces of a planar arrangement of polylines (the regions the traced curves bound).
+
+The curves of :mod:`optkin.analysis.continuation` are polylines in a plane. The regions
+they bound (aspects, workspaces) are the faces of their arrangement: every pair of segments
+is intersected, open ends are snapped onto the curve they stop on (within a tolerance of
+the continuation step), dangling pieces are pruned, and the faces are walked on the
+half-edge structure (the next half-edge turns clockwise-most). Faces are counter-clockwise
+outer rings with the outer rings of the components nested in them as holes, so that the
+connectivity of a region follows the traced curves, not a grid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from matplotlib.path import Path
+from scipy.spatial import cKDTree
+
+__all__ = ["Face", "faces", "ring_area", "point_in_face"]
+
+
+@dataclass
+class Face:
+    """A bounded face: ``outer`` (k, 2) counter-clockwise, ``holes`` clockwise rings."""
+
+    outer: np.ndarray
+    holes: list[np.ndarray] = field(default_factory=list)
+    area: float = 0.0
+    point: np.ndarray | None = None
+
+    def contains(self, P: np.ndarray) -> np.ndarray:
+        return point_in_face(self, P)
+
+
+def ring_area(R: np.ndarray) -> float:
+    x, y = R[:, 0], R[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def point_in_face(f: Face, P: np.ndarray) -> np.ndarray:
+    P = np.atleast_2d(P)
+    inside = Path(f.outer).contains_points(P)
+    for h in f.holes:
+        inside &= ~Path(h).contains_points(P)
+    return inside
+
+
+def _segments(lines: list[tuple[np.ndarray, bool]]):
+    A, B, pid = [], [], []
+    for k, (P, closed) in enumerate(lines):
+        P = np.asarray(P, dtype=float)
+        if closed and np.linalg.norm(P[0] - P[-1]) > 0:
+            P = np.vstack([P, P[:1]])
+        if len(P) < 2:
+            continue
+        A.append(P[:-1])
+        B.append(P[1:])
+        pid.append(np.full(len(P) - 1, k))
+    if not A:
+        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, int)
+    A, B, pid = np.vstack(A), np.vstack(B), np.concatenate(pid)
+    keep = np.linalg.norm(B - A, axis=1) > 0
+    return A[keep], B[keep], pid[keep]
+
+
+def _project(p: np.ndarray, A: np.ndarray, B: np.ndarray):
+    d = B - A
+    L2 = np.einsum("ij,ij->i", d, d)
+    t = np.clip(np.einsum("ij,ij->i", p - A, d) / np.where(L2 > 0, L2, 1), 0, 1)
+    Q = A + t[:, None] * d
+    dist = np.linalg.norm(Q - p, axis=1)
+    return t, Q, dist
+
+
+def _seg_dist(P: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Distance of every point P (k, 2) to the nearest segment [A, B] (n, 2)."""
+    out = np.empty(len(P))
+    d = B - A
+    L2 = np.einsum("ij,ij->i", d, d)
+    L2 = np.where(L2 > 0, L2, 1)
+    step = max(1, 1_000_000 // max(len(A), 1))
+    for s0 in range(0, len(P), step):
+        Q = P[s0:s0 + step, None, :] - A[None]
+        t = np.clip(np.einsum("kij,ij->ki", Q, d) / L2, 0, 1)
+        E = Q - t[..., None] * d[None]
+        out[s0:s0 + step] = np.sqrt(np.min(np.einsum("kij,kij->ki", E, E), axis=1))
+    return out
+
+
+def faces(lines: list[tuple[np.ndarray, bool]], snap: float, dedupe: float = 0.0) -> list[Face]:
+    """The bounded faces of the arrangement of ``lines`` = [(points (k, 2), closed), ...].
+
+    ``snap``: open ends farther than this from every other curve dangle (and are pruned);
+    nearer ones are moved onto the nearest curve. ``dedupe`` > 0 drops segments whose
+    midpoint lies within ``dedupe`` of an earlier curve's segment (overlapping copies).
+    """
+    lines = [(np.asarray(P, dtype=float), bool(c)) for P, c in lines if len(P) >= 2]
+    A, B, pid = _segments(lines)
+    if len(A) == 0:
+        return []
+    if dedupe > 0:
+        keep = np.ones(len(A), dtype=bool)
+        M = 0.5 * (A + B)
+        for k in np.unique(pid):
+            mine = np.flatnonzero(pid == k)
+            other = np.flatnonzero((pid < k) & keep)
+            if len(other) == 0:
+                continue
+            keep[mine] = _seg_dist(M[mine], A[other], B[other]) >= dedupe
+        A, B, pid = A[keep], B[keep], pid[keep]
+    n = len(A)
+    splits: list[list[float]] = [[0.0, 1.0] for _ in range(n)]
+    # snap open ends onto the nearest other segment
+    ends = []
+    for k, (_, closed) in enumerate(lines):
+        if closed:
+            continue
+        idx = np.flatnonzero(pid == k)
+        if len(idx) == 0:
+            continue
+        ends.append((idx[0], 0))
+        ends.append((idx[-1], 1))
+    for si, which in ends:
+        p = A[si] if which == 0 else B[si]
+        mask = np.ones(n, dtype=bool)
+        mask[max(si - 1, 0):si + 2] = False
+        mask &= ~((pid == pid[si]) & (np.abs(np.arange(n) - si) < 3))
+        if not mask.any():
+            continue
+        idx = np.flatnonzero(mask)
+        t, Q, dist = _project(p, A[idx], B[idx])
+        j = int(np.argmin(dist))
+        if dist[j] < snap:
+            q = Q[j]
+            if which == 0:
+                A[si] = q
+            else:
+                B[si] = q
+            splits[idx[j]].append(float(t[j]))
+    # pairwise intersections (chunked)
+    d = B - A
+    chunk = max(1, 2_000_000 // max(n, 1))
+    for s0 in range(0, n, chunk):
+        s1 = min(n, s0 + chunk)
+        a, da = A[s0:s1, None, :], d[s0:s1, None, :]
+        den = da[..., 0] * d[None, :, 1] - da[..., 1] * d[None, :, 0]
+        w = A[None, :, :] - a
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (w[..., 0] * d[None, :, 1] - w[..., 1] * d[None, :, 0]) / den
+            u = (w[..., 0] * da[..., 1] - w[..., 1] * da[..., 0]) / den
+        eps = 1e-12
+        hit = (np.abs(den) > 1e-300) & (t >= -eps) & (t <= 1 + eps) & (u >= -eps) & (u <= 1 + eps)
+        ii, jj = np.nonzero(hit)
+        ii = ii + s0
+        sel = jj > ii
+        for i, j, tt, uu in zip(ii[sel], jj[sel], t[hit][sel], u[hit][sel]):
+            splits[i].append(float(np.clip(tt, 0, 1)))
+            splits[j].append(float(np.clip(uu, 0, 1)))
+    # vertices and edges
+    pts = []
+    edges_raw = []
+    for i in range(n):
+        ts = np.unique(np.array(splits[i]))
+        P = A[i] + ts[:, None] * d[i]
+        base = len(pts)
+        pts.extend(P)
+        edges_raw += [(base + k, base + k + 1) for k in range(len(ts) - 1)]
+    pts = np.array(pts)
+    scale = float(np.max(np.ptp(pts, axis=0))) or 1.0
+    tree = cKDTree(pts)
+    pairs = tree.query_pairs(1e-9 * scale, output_type="ndarray")
+    parent = np.arange(len(pts))
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for a, b in pairs:
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    root = np.array([find(i) for i in range(len(pts))])
+    E = {(min(root[a], root[b]), max(root[a], root[b])) for a, b in edges_raw if root[a] != root[b]}
+    # prune dangling edges
+    adj: dict[int, set[int]] = {}
+    for a, b in E:
+        adj.setdefault(a, set()).add(b)
+        adj.setdefault(b, set()).add(a)
+    stack = [v for v, s in adj.items() if len(s) <= 1]
+    while stack:
+        v = stack.pop()
+        for w in list(adj.get(v, ())):
+            adj[w].discard(v)
+            if len(adj[w]) == 1:
+                stack.append(w)
+        adj.pop(v, None)
+    if not adj:
+        return []
+    # half-edge walk
+    order: dict[int, list[int]] = {}
+    pos: dict[tuple[int, int], int] = {}
+    for v, nb in adj.items():
+        nbl = list(nb)
+        ang = [np.arctan2(pts[w, 1] - pts[v, 1], pts[w, 0] - pts[v, 0]) for w in nbl]
+        srt = [nbl[k] for k in np.argsort(ang)]
+        order[v] = srt
+        for k, w in enumerate(srt):
+            pos[(v, w)] = k
+    seen: set[tuple[int, int]] = set()
+    cycles = []
+    for v in adj:
+        for w in adj[v]:
+            if (v, w) in seen:
+                continue
+            cyc = []
+            a, b = v, w
+            while (a, b) not in seen:
+                seen.add((a, b))
+                cyc.append(a)
+                lst = order[b]
+                k = pos[(b, a)]
+                c = lst[(k - 1) % len(lst)]
+                a, b = b, c
+            cycles.append(np.array(cyc))
+    # components (for hole assignment)
+    comp = {}
+    cid = 0
+    for v in adj:
+        if v in comp:
+            continue
+        st = [v]
+        comp[v] = cid
+        while st:
+            x = st.pop()
+            for y in adj[x]:
+                if y not in comp:
+                    comp[y] = cid
+                    st.append(y)
+        cid += 1
+    pos_f, neg_f = [], []
+    for cyc in cycles:
+        R = pts[cyc]
+        ar = ring_area(R)
+        if ar > 0:
+            pos_f.append((R, ar, comp[cyc[0]]))
+        elif ar < 0:
+            neg_f.append((R, ar, comp[cyc[0]]))
+    out = [Face(outer=R, holes=[], area=ar) for R, ar, _ in pos_f]
+    tiny = 1e-10 * scale * scale
+    paths = [Path(R) for R, _, _ in pos_f]
+    for R, ar, c in neg_f:
+        best, barea = None, np.inf
+        probe = R[0]
+        for k, (_, arp, cp) in enumerate(pos_f):
+            if cp == c:
+                continue
+            if arp < barea and paths[k].contains_point(probe):
+                best, barea = k, arp
+        if best is not None:
+            out[best].holes.append(R)
+            out[best].area += ar
+    out = [f for f in out if f.area > tiny]
+    for f in out:
+        f.point = _interior_point(f)
+    return out
+
+
+def _interior_point(f: Face) -> np.ndarray | None:
+    """A point well inside the face (the best of offsets from the edge midpoints)."""
+    R = f.outer
+    allr = [R] + list(f.holes)
+    segA = np.vstack([r for r in allr])
+    segB = np.vstack([np.roll(r, -1, axis=0) for r in allr])
+    size = np.sqrt(max(f.area, 1e-300))
+    cands = []
+    Rn = np.roll(R, -1, axis=0)
+    mids = 0.5 * (R + Rn)
+    tang = Rn - R
+    nrm = np.stack([-tang[:, 1], tang[:, 0]], 1)
+    ln = np.linalg.norm(nrm, axis=1)
+    ok = ln > 0
+    nrm[ok] /= ln[ok, None]
+    step = max(1, len(R) // 40)
+    for frac in (0.2, 0.05, 0.01, 1e-3):
+        C = mids[::step] + frac * size * nrm[::step]
+        cands.append(C)
+    C = np.vstack(cands)
+    inside = point_in_face(f, C)
+    if not inside.any():
+        return None
+    C = C[inside]
+    dist = _seg_dist(C, segA, segB)
+    return C[int(np.argmax(dist))]
