@@ -50,7 +50,7 @@ def _results(out: Path) -> dict[str, dict[str, Any]]:
 def _numbers(node: Any, prefix: str = "") -> dict[str, Any]:
     """The numeric/boolean/string leaves of a result, minus timings and host details."""
     skip = {"time", "elapsed", "started", "stats", "worker", "model_build_time", "solve_time",
-            "setup_time", "t_wall_total", "file", "notes"}
+            "setup_time", "t_wall_total", "file", "notes", "run_id"}
     out: dict[str, Any] = {}
     if isinstance(node, dict):
         for k, v in node.items():
@@ -82,7 +82,7 @@ def assert_same_results(a: dict[str, dict], b: dict[str, dict]) -> None:
 # ---------------------------------------------------------------------------
 
 
-def test_bundled_problems_pass_then_resume(tmp_path: Path) -> None:
+def test_bundled_problems_pass_then_resume(tmp_path: Path, capsys) -> None:
     out = tmp_path / "results"
     t0 = time.perf_counter()
     r = optkin("run", "problems/", "--out", str(out))
@@ -107,36 +107,34 @@ def test_bundled_problems_pass_then_resume(tmp_path: Path) -> None:
     # the same run again does no work
     mtimes = {p: p.stat().st_mtime_ns for p in out.iterdir()}
     t0 = time.perf_counter()
-    r2 = optkin("run", "problems/", "--out", str(out))
+    assert main(["run", str(PROBLEMS), "--out", str(out)]) == 0
     again = time.perf_counter() - t0
-    assert r2.returncode == 0, r2.stdout + r2.stderr
-    assert f"0 run, {n} skipped" in r2.stdout
+    assert f"0 run, {n} skipped" in capsys.readouterr().out
     for p, m in mtimes.items():
         if p.name != "summary.csv":
             assert p.stat().st_mtime_ns == m, p
     assert again < first
 
 
-def test_force_redoes_and_changed_input_reruns(small: Path, tmp_path: Path) -> None:
+def test_force_redoes_and_changed_input_reruns(small: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "out"
-    assert optkin("run", str(small), "--out", str(out), "--no-pictures").returncode == 0
-    stamp = {p.name: json.loads(p.read_text())["started"] for p in out.glob("*.json")}
-    pids = {p.name: json.loads(p.read_text())["worker"]["pid"] for p in out.glob("*.json")}
+    args = ["run", str(small), "--out", str(out), "--no-pictures"]
+    assert main(args) == 0
+    runs = {p.name: json.loads(p.read_text())["run_id"] for p in out.glob("*.json")}
+    assert len(runs) == len(SMALL)
     # an edited file (even a comment) has a new hash: only it reruns
     f = small / "rpr3.toml"
     f.write_text(f.read_text() + "\n# edited\n")
-    r = optkin("run", str(small), "--out", str(out), "--no-pictures")
-    assert r.returncode == 0
-    assert f"1 run, {len(SMALL) - 1} skipped" in r.stdout
-    after = {p.name: json.loads(p.read_text())["worker"]["pid"] for p in out.glob("*.json")}
-    assert [n for n in after if after[n] != pids[n]] == ["rpr3.json"]
+    capsys.readouterr()
+    assert main(args) == 0
+    assert f"1 run, {len(SMALL) - 1} skipped" in capsys.readouterr().out
+    after = {p.name: json.loads(p.read_text())["run_id"] for p in out.glob("*.json")}
+    assert [n for n in after if after[n] != runs[n]] == ["rpr3.json"]
     # --force reruns everything
-    r = optkin("run", str(small), "--out", str(out), "--no-pictures", "--force")
-    assert r.returncode == 0
-    assert f"{len(SMALL)} run, 0 skipped" in r.stdout
-    forced = {p.name: json.loads(p.read_text()) for p in out.glob("*.json")}
-    assert all(forced[n]["worker"]["pid"] != pids[n] for n in forced)
-    assert set(forced) == set(stamp)
+    assert main(args + ["--force"]) == 0
+    assert f"{len(SMALL)} run, 0 skipped" in capsys.readouterr().out
+    forced = {p.name: json.loads(p.read_text())["run_id"] for p in out.glob("*.json")}
+    assert all(forced[n] != after[n] for n in forced)
 
 
 def test_input_hash_includes_the_optkin_version(monkeypatch) -> None:
@@ -247,7 +245,7 @@ def test_show_draws_a_png(tmp_path: Path) -> None:
 # ---------------------------------------------------------------------------
 
 
-def test_sigkill_mid_run_leaves_complete_files_and_rerun_finishes(tmp_path: Path) -> None:
+def test_sigkill_mid_run_leaves_complete_files_and_rerun_finishes(tmp_path: Path, capsys) -> None:
     src = tmp_path / "many"
     src.mkdir()
     names = []
@@ -284,9 +282,8 @@ def test_sigkill_mid_run_leaves_complete_files_and_rerun_finishes(tmp_path: Path
         if p.suffix == ".tmp":
             assert p.name.startswith(".")
     done_before = {p.name for p in left}
-    r = optkin("run", str(src), "--out", str(out))
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert f"{len(names) - len(done_before)} run, {len(done_before)} skipped" in r.stdout
+    assert main(["run", str(src), "--out", str(out)]) == 0
+    assert f"{len(names) - len(done_before)} run, {len(done_before)} skipped" in capsys.readouterr().out
     assert sorted(p.name for p in out.glob("*.json")) == sorted(names)
     assert not list(out.glob(".*.tmp"))
     for p in out.glob("*.json"):
@@ -299,9 +296,9 @@ def test_sigkill_mid_run_leaves_complete_files_and_rerun_finishes(tmp_path: Path
 
 
 def test_jobs_2_gives_the_same_results_as_jobs_1(small: Path, tmp_path: Path) -> None:
-    r1 = optkin("run", str(small), "--out", str(tmp_path / "j1"), "--no-pictures", "--jobs", "1")
-    r2 = optkin("run", str(small), "--out", str(tmp_path / "j2"), "--no-pictures", "--jobs", "2")
-    assert r1.returncode == r2.returncode == 0, r2.stdout + r2.stderr
+    for jobs in ("1", "2"):
+        args = ["run", str(small), "--out", str(tmp_path / f"j{jobs}"), "--no-pictures"]
+        assert main(args + ["--jobs", jobs]) == 0
     a, b = _results(tmp_path / "j1"), _results(tmp_path / "j2")
     assert_same_results(a, b)
     assert len({d["worker"]["pid"] for d in b.values()}) == 2  # really two processes

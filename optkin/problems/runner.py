@@ -19,6 +19,7 @@ import platform
 import tempfile
 import time
 import traceback
+import uuid
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
@@ -365,6 +366,7 @@ def run_problem(problem: Problem, picture_dir: Path | None = None,
         "result_format": RESULT_FORMAT,
         "complete": True,
         "problem": problem.display,
+        "run_id": uuid.uuid4().hex,
         "file": str(problem.path),
         "input_hash": problem.hash,
         "optkin_version": optkin_version(),
@@ -567,7 +569,8 @@ def _run_pool(jobs: int, todo: list[tuple[ProblemFileInfo, bytes]], pictures: bo
 
     method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
     ctx = mp.get_context(method)
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx)
+    try:
         futures: dict[Future, ProblemFileInfo] = {
             pool.submit(run_job, info.display, data, str(info.path), pictures): info
             for info, data in todo
@@ -581,6 +584,10 @@ def _run_pool(jobs: int, todo: list[tuple[ProblemFileInfo, bytes]], pictures: bo
                     done(info, f.result(), None)
                 except Exception as e:  # noqa: BLE001 - includes a crashed worker
                     done(info, None, f"{type(e).__name__}: {e}")
+    except BaseException:  # Ctrl-C: drop queued problems, keep what is written
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
 
 
 def _run_dask(address: str, todo: list[tuple[ProblemFileInfo, bytes]], pictures: bool,
