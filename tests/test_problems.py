@@ -301,18 +301,31 @@ def test_several_errors_are_reported_together(tmp_path) -> None:
 # ---------------------------------------------------------------------------
 
 
-def test_bundled_problems_cover_every_library_mechanism() -> None:
-    names = set()
+def test_bundled_problems_cover_every_library_mechanism_and_kind() -> None:
+    from optkin.problems.tasks import TASKS, library_function
+
+    both: set[str] = set()
+    kinds: set[str] = set()
     for path in BUNDLED:
         p = load_problem(path)
         m = p.spec.mechanism
-        if m.type == "library":
-            names.add(m.name)
-        kinds = {t.kind for t in p.spec.task}
-        assert {"forward", "inverse"} & kinds, path.name
+        task_kinds = {t.kind for t in p.spec.task}
+        kinds |= task_kinds
+        if m.type == "library" and {"forward", "inverse"} <= task_kinds:
+            both.add(m.name)
         for t in p.spec.task:
             assert t.expected is not None, f"{path.name}: every bundled task has [expected]"
-    assert set(optkin.mechanisms.LIBRARY) <= names
+    # one file per library mechanism with forward and inverse tasks
+    assert set(optkin.mechanisms.LIBRARY) <= both
+    # and every task kind whose library function exists
+    available = set()
+    for kind in TASKS:
+        try:
+            library_function({"statics": "statics.capability"}.get(kind, kind), kind)
+            available.add(kind)
+        except NotImplementedError:
+            pass
+    assert available <= kinds, available - kinds
 
 
 @pytest.mark.parametrize("path", BUNDLED, ids=[p.name for p in BUNDLED])

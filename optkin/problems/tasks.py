@@ -235,6 +235,17 @@ def _generic(res: Any) -> dict[str, Any]:
     return out
 
 
+def _accepts(fn: Callable[..., Any], name: str) -> bool:
+    """Whether ``fn`` takes a keyword ``name`` (or ``**kwargs``)."""
+    import inspect
+
+    try:
+        params = inspect.signature(fn).parameters
+    except (TypeError, ValueError):
+        return True
+    return name in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
+
+
 def _kw(task: Any, *keys: str) -> dict[str, Any]:
     return {k: getattr(task, k) for k in keys if getattr(task, k, None) is not None}
 
@@ -274,8 +285,12 @@ def dof_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.dof(mech[, q], **options)``."""
     fn = library_function("dof", "dof")
     q = _q_of(mech, task, ctx)
-    args = () if q is None else (q,)
-    return _generic(fn(mech, *args, **dict(task.options)))
+    kw = dict(task.options)
+    if q is not None:
+        if not _accepts(fn, "q"):
+            raise ValueError("this optkin's dof() takes no configuration; remove 'q'")
+        kw["q"] = q
+    return _generic(fn(mech, **kw))
 
 
 @register("classify")
