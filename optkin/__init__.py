@@ -13,6 +13,7 @@ from .model import get_model
 from .results import KinResult, SolutionSet, SolverStats
 from .solvers import forward, inverse
 from .solvers.batch import BatchResult, forward_batch
+from .solvers.enumerate import WorkingModes, assembly_modes, track, working_modes
 
 __version__ = "0.1.0"
 
@@ -29,7 +30,9 @@ __all__ = [
     "SolutionSet",
     "SolverError",
     "SolverStats",
+    "WorkingModes",
     "__version__",
+    "assembly_modes",
     "classify",
     "dof",
     "BatchResult",
@@ -41,4 +44,6 @@ __all__ = [
     "mechanisms",
     "plot",
     "statics",
+    "track",
+    "working_modes",
 ]

@@ -1,0 +1,1044 @@
+"""Every assembly mode: multi-start enumeration with a measured completeness; path tracking.
+
+:func:`assembly_modes` solves the direct geometric model Phi(q_a, x) = 0 ([7.9] of seed 000)
+from many starting points at once. The starts are low-discrepancy (scrambled Sobol) points
+over the unknowns: joint angles over [-pi, pi) for Khalil mechanisms, SO(2) angles or
+uniform unit quaternions (Shoemake's map of Sobol points) for platforms, positions in the
+box where every leg can still close. For platforms whose legs are all distance constraints
+(every leg type here: a prismatic leg is a distance to its base joint, an RRR or RUS leg a
+distance to its elbow, fixed once q_a is known) and enough legs, the position is not sampled:
+differences of the squared leg equations are linear in the position (the elimination of
+Modern Robotics 7.1.1), so each sampled orientation gets the least-squares position.
+
+The starts run through Khalil's iteration (Newton with the step clamped to a threshold S,
+[7.55]) compiled into one CasADi Function mapped over a pool of columns (C code via the JIT
+for large models). Converged columns are deduplicated as they arrive (angles modulo 2 pi,
+quaternion sign, a tolerance relative to the mechanism size) and replaced by fresh starts.
+The solution set reports how many starts ran, how many converged, how often each solution was
+hit, and the Good-Turing estimate of the probability that a further start would find a new
+solution (the share of starts whose solution was seen exactly once). Enumeration stops when
+that estimate reaches the target, when the number of solutions reaches a known upper bound
+for the mechanism class (6 for a planar platform with three distance legs, 40 for a 6-6
+platform, 2 for a five-bar or a Delta: the set is then provably complete), or at the start
+budget or time limit. IPOPT ([7.9] as an NLP) only rescues starts that stalled.
+
+:func:`track` follows one assembly mode along a path of actuated values (predictor-corrector
+continuation with step halving) and stops with status ``"singular"`` where det W_p changes
+sign or W_p becomes ill-conditioned, instead of jumping to another mode.
+
+:func:`working_modes` lists the sign patterns of the diagonal B = W_a of a fully parallel
+mechanism (Chablat and Wenger, seed 004, Definition 4) and, at a pose, which exist.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+import warnings
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from scipy.stats import qmc
+
+from ..errors import MechanismError
+from ..mechanism import Mechanism
+from ..mechanism.geometry import wrap_angle
+from ..model import Model, get_model
+from ..results import KinResult, SolutionSet, SolverStats
+from .common import check_qa, make_result, merge_options, newton, parse_guess, timer
+
+__all__ = [
+    "assembly_modes",
+    "track",
+    "working_modes",
+    "WorkingModes",
+    "ASSEMBLY_DEFAULTS",
+    "TRACK_DEFAULTS",
+    "known_bound",
+]
+
+#: Options of :func:`assembly_modes` and their defaults.
+ASSEMBLY_DEFAULTS: dict[str, Any] = {
+    "tol": 1e-10,  # max |Phi| for a converged start
+    "starts": 20000,  # start budget
+    "min_starts": "auto",  # starts before the target may stop a run: auto 256, 2048 (6+ unknowns)
+    "target": 1e-3,  # stop when the Good-Turing probability of a new solution is <= target
+    "time_limit": 10.0,  # seconds (compilation excluded)
+    "bound": "auto",  # known upper bound on the number of real solutions (None: unknown)
+    "width": "auto",  # columns of the mapped Newton step (the pool of starts run at once)
+    "max_iter": 40,  # Newton iterations per start
+    "step_max": "auto",  # threshold S of [7.55], scaled units (lengths / size); auto 0.3 or 1
+    "dedup_tol": 1e-6,  # scaled distance under which two solutions are the same
+    "rescue": 8,  # IPOPT rescues of stalled starts
+    "jit": "auto",  # compile the step to C: True, False, "auto" (6+ unknowns, or if cached)
+    "threads": 2,  # threads of the mapped step
+}
+
+#: Options of :func:`track` and their defaults.
+TRACK_DEFAULTS: dict[str, Any] = {
+    "tol": 1e-10,  # max |Phi| at every accepted point
+    "max_iter": 8,  # corrector Newton iterations per sub-step
+    "min_step": 2.0**-14,  # smallest sub-step, as a fraction of one path segment
+    "cond_max": 1e8,  # scaled cond(W_p) at which the path is declared singular
+    "cond_near": 1e3,  # where the halving runs out: cond above which the stop is "singular"
+    "max_correction": 0.25,  # largest corrector move (scaled units) before a step is halved
+    "contraction": 0.5,  # largest corrector move relative to the predicted move
+}
+
+_PLATFORM_BOUNDS = {"planar": 6, "planar_point": 2, "spatial": 40, "spatial_translational": 2}
+
+
+def known_bound(mech: Mechanism) -> int | None:
+    """An upper bound on the number of real assembly modes, when the class has one.
+
+    Every leg type here is a distance constraint between a platform point and a point fixed
+    by q_a, so a planar platform on three legs has at most 6 modes (the sextic of Modern
+    Robotics 7.1.1), a spatial one on six legs at most 40 (Raghavan and Roth), a point on two
+    legs (five-bar) or a translating platform on three (Delta) at most 2. None otherwise
+    (Khalil mechanisms, redundant actuation).
+    """
+    if mech.kind != "legs":
+        return None
+    need = {"planar": 3, "planar_point": 2, "spatial": 6, "spatial_translational": 3}
+    if len(mech.legs) != need.get(mech.platform, -1):
+        return None
+    return _PLATFORM_BOUNDS[mech.platform]
+
+
+# ---------------------------------------------------------------------------------------------
+# the distance form of leg mechanisms: |p + R b_i - c_i(q_a)| = r_i(q_a)
+# ---------------------------------------------------------------------------------------------
+
+
+def _pad3(v: np.ndarray) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    return np.concatenate([v, np.zeros(3 - v.size)]) if v.size < 3 else v
+
+
+def _distance_form(model: Model, qa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(centres c (n, 3), radii r (n,), platform points b (n, 3)) of the legs, or None.
+
+    Mirrors the leg rows of the model; checked against ``model.phi`` at a test point, so a
+    leg type written differently there falls back to plain box sampling.
+    """
+    mech = model.mech
+    if mech.kind != "legs":
+        return None
+    cs, rs, bs = [], [], []
+    for i, leg in enumerate(mech.legs):
+        A = _pad3(leg.base)
+        a = float(qa[i])
+        if leg.type in ("RPR", "UPS", "SPS"):
+            c, r = A, a
+        elif leg.type == "RRR":
+            l1, l2 = leg.lengths
+            c, r = A + l1 * np.array([np.cos(a), np.sin(a), 0.0]), l2
+        elif leg.type in ("RUS", "RSS"):
+            la, lb = leg.lengths
+            arm = np.asarray(leg.arm, dtype=float)
+            w = np.cross(np.asarray(leg.axis, dtype=float), arm)
+            c, r = A + la * (np.cos(a) * arm + np.sin(a) * w), lb
+        else:
+            return None
+        cs.append(c)
+        rs.append(r)
+        bs.append(_pad3(leg.platform))
+    c, r, b = np.array(cs), np.array(rs, dtype=float), np.array(bs)
+    ok = _FORM_OK.get(mech.key)
+    if ok is not None:
+        return (c, r, b) if ok else None
+    # check against the model at a test point (once per mechanism)
+    rng = np.random.default_rng(12345)
+    x = model.default_x(qa) + 0.1 * model.x_scale * rng.standard_normal(model.nx)
+    if mech.platform == "spatial":
+        x[3:7] /= np.linalg.norm(x[3:7])
+    R, p = _frame_np(mech.platform, x[None, :])
+    f = np.linalg.norm(p[0] + b @ R[0].T - c, axis=1) - r
+    ref = model.residual(qa, x)[: len(mech.legs)]
+    ok = bool(np.allclose(f, ref, atol=1e-9 * max(1.0, model.length)))
+    _FORM_OK[mech.key] = ok
+    return (c, r, b) if ok else None
+
+
+def _frame_np(platform: str, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(R (n, 3, 3), p (n, 3)) of the platform for rows of unknowns X (n, nx)."""
+    n = X.shape[0]
+    R = np.zeros((n, 3, 3))
+    p = np.zeros((n, 3))
+    if platform == "planar":
+        c, s = np.cos(X[:, 2]), np.sin(X[:, 2])
+        R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
+        p[:, :2] = X[:, :2]
+    elif platform == "spatial":
+        w, a, b_, c_ = X[:, 3], X[:, 4], X[:, 5], X[:, 6]
+        R[:, 0] = np.stack([1 - 2 * (b_ * b_ + c_ * c_), 2 * (a * b_ - c_ * w), 2 * (a * c_ + b_ * w)], 1)
+        R[:, 1] = np.stack([2 * (a * b_ + c_ * w), 1 - 2 * (a * a + c_ * c_), 2 * (b_ * c_ - a * w)], 1)
+        R[:, 2] = np.stack([2 * (a * c_ - b_ * w), 2 * (b_ * c_ + a * w), 1 - 2 * (a * a + b_ * b_)], 1)
+        p[:, :] = X[:, :3]
+    else:
+        R[:] = np.eye(3)
+        k = 2 if platform == "planar_point" else 3
+        p[:, :k] = X[:, :k]
+    return R, p
+
+
+def shoemake(U: np.ndarray) -> np.ndarray:
+    """Unit quaternions (w, x, y, z), uniform on SO(3), from points U (n, 3) of [0, 1)^3
+    (Shoemake's subgroup algorithm); w >= 0."""
+    u1, u2, u3 = U[:, 0], U[:, 1], U[:, 2]
+    a, b = np.sqrt(1.0 - u1), np.sqrt(u1)
+    q = np.stack([b * np.cos(2 * np.pi * u3), a * np.sin(2 * np.pi * u2),
+                  a * np.cos(2 * np.pi * u2), b * np.sin(2 * np.pi * u3)], 1)
+    return q * np.where(q[:, :1] < 0, -1.0, 1.0)
+
+
+_SOBOL: dict[tuple[int, int], qmc.Sobol] = {}
+_FORM_OK: dict[str, bool] = {}
+
+
+def _sobol(dim: int, seed: int) -> qmc.Sobol:
+    """A scrambled Sobol engine, reset to its first point (engines are cached: building
+    one costs more than a small enumeration)."""
+    eng = _SOBOL.get((dim, seed))
+    if eng is None:
+        eng = qmc.Sobol(dim, scramble=True, seed=seed)
+        _SOBOL[(dim, seed)] = eng
+    else:
+        eng.reset()
+    return eng
+
+
+class _Starts:
+    """Low-discrepancy starting points x (columns) for one mechanism and q_a."""
+
+    def __init__(self, model: Model, qa: np.ndarray, seed: int, block: int) -> None:
+        self.model = model
+        mech = model.mech
+        self.block = block
+        self.empty_reason: str | None = None
+        self.lo = self.hi = None
+        self.ls = False
+        self.buf = np.zeros((model.nx, 0))
+        plat = mech.platform if mech.kind == "legs" else None
+        self.plat = plat
+        if mech.kind == "khalil":
+            self.dim = model.nx
+            L = 2.0 * model.length
+            self.lo = np.where(model.x_angle, -np.pi, -L)
+            self.hi = np.where(model.x_angle, np.pi, L)
+        else:
+            form = _distance_form(model, qa)
+            self.form = form
+            ndim = 2 if mech.planar else 3
+            rot = plat in ("planar", "spatial")
+            if form is not None:
+                c, r, b = form
+                reach = r + (np.linalg.norm(b, axis=1) if rot else 0.0)
+                cen = c if rot else c - b
+                lo = np.max(cen - reach[:, None], axis=0)[:ndim]
+                hi = np.min(cen + reach[:, None], axis=0)[:ndim]
+                if np.any(lo > hi + 1e-12 * model.length):
+                    k = int(np.argmax(lo - hi))
+                    self.empty_reason = (
+                        f"no closed configuration: the legs cannot all reach a common platform "
+                        f"position (their reach boxes do not overlap along axis {'xyz'[k]})"
+                    )
+                hi = np.maximum(hi, lo)
+                # the least-squares position needs as many independent differences as
+                # coordinates; it speeds up spatial platforms, while planar ones reach rare
+                # modes far more often from box starts (measured: 3-RPR modes hit by 0.1 % of
+                # least-squares starts get 3 % or more of box starts)
+                self.ls = plat == "spatial" and len(mech.legs) - 1 >= ndim
+            else:
+                base = np.array([_pad3(leg.base) for leg in mech.legs])[:, :ndim]
+                span = 2.0 * model.length + float(np.max(np.abs(qa))) if qa.size else 2.0 * model.length
+                lo, hi = base.min(0) - span, base.max(0) + span
+            self.plo, self.phi = lo, hi
+            nrot = {"planar": 1, "spatial": 3}.get(plat, 0)
+            self.nrot = nrot
+            self.ndim = ndim
+            self.dim = nrot + (0 if self.ls else ndim)
+        self.sob = _sobol(self.dim, seed)
+
+    def _make(self, U: np.ndarray) -> np.ndarray:
+        model = self.model
+        if self.model.mech.kind == "khalil":
+            return (self.lo + U * (self.hi - self.lo)).T
+        n = U.shape[0]
+        plat = self.plat
+        X = np.zeros((n, model.nx))
+        if plat == "planar":
+            X[:, 2] = -np.pi + 2 * np.pi * U[:, 0]
+        elif plat == "spatial":
+            X[:, 3:7] = shoemake(U[:, :3])
+        if self.ls:
+            R, _ = _frame_np(plat, X)
+            X[:, : self.ndim] = self._ls_position(R)
+        else:
+            X[:, : self.ndim] = self.plo + U[:, self.nrot:] * (self.phi - self.plo)
+        return X.T
+
+    def _ls_position(self, R: np.ndarray) -> np.ndarray:
+        """Positions p minimising the differences of the squared leg equations
+        |p|^2 + 2 p.d_i + |d_i|^2 - r_i^2 = 0, d_i = R b_i - c_i (linear in p)."""
+        c, r, b = self.form
+        k = self.ndim
+        d = (np.einsum("nij,kj->nki", R, b) - c[None])[:, :, :k]
+        e = np.sum(d * d, axis=2) - r[None] ** 2
+        A = 2.0 * (d[:, 1:] - d[:, :1])
+        rhs = -(e[:, 1:] - e[:, :1])
+        AtA = np.einsum("nki,nkj->nij", A, A) + 1e-12 * np.eye(k)
+        Atb = np.einsum("nki,nk->ni", A, rhs)
+        p = np.linalg.solve(AtA, Atb[..., None])[..., 0]
+        return np.clip(p, self.plo, self.phi)
+
+    def take(self, n: int) -> np.ndarray:
+        while self.buf.shape[1] < n:
+            self.buf = np.hstack([self.buf, self._make(self.sob.random(self.block))])
+        out, self.buf = self.buf[:, :n], self.buf[:, n:]
+        return out
+
+
+# ---------------------------------------------------------------------------------------------
+# the compiled, mapped step
+# ---------------------------------------------------------------------------------------------
+
+_STEPS: dict[tuple, tuple[ca.Function, float, bool]] = {}
+
+
+def _clamped_step(model: Model, step_max: float, k: int = 1) -> ca.Function:
+    """k iterations x -> x + dx min(1, S / |dx / scale|), dx the Newton (Gauss-Newton when
+    there are more rows than unknowns) step: Khalil's clamped iteration [7.55]. Returns the
+    new x and max |Phi| there."""
+    x, qa, phi = model.x_sym, model.qa_sym, model.phi_sym
+    Wp = ca.jacobian(phi, x)
+    if model.m == model.nx:
+        dx = -ca.solve(Wp, phi)
+    else:
+        dx = -ca.solve(ca.mtimes(Wp.T, Wp), ca.mtimes(Wp.T, phi))
+    nrm = ca.norm_2(dx / model.x_scale)
+    one = ca.Function("one", [qa, x], [x + dx * ca.fmin(1, step_max / (nrm + 1e-300))])
+    xs = x
+    for _ in range(k):
+        xs = one(qa, xs)
+    fphi = ca.Function("phi", [qa, x], [ca.mmax(ca.fabs(phi)) if model.m else ca.SX(0)])
+    return ca.Function("clamped_newton", [qa, x], [xs, fphi(qa, xs)], ["qa", "x"],
+                       ["x_next", "res"])
+
+
+def _mapped_step(model: Model, width: int, step_max: float, k: int, jit: bool | str,
+                 threads: int):
+    """The clamped step mapped over ``width`` columns, cached; (Function, setup s, compiled).
+
+    ``jit=True`` compiles the step to C (through :func:`optkin.model.compiled.library`, so
+    the shared library is cached on disk and later processes load it in milliseconds);
+    ``"cached"`` uses a compiled step only when it is already in the disk cache.
+    """
+    key = (model.mech.key, width, float(step_max), int(k), jit, int(threads))
+    hit = _STEPS.get(key)
+    if hit is not None:
+        return hit[0], 0.0, hit[2]
+    t0 = time.perf_counter()
+    f = _clamped_step(model, step_max, k)
+    compiled = False
+    if jit:
+        from ..model import compiled as cc
+
+        lib = cc.library(f"enum:{model.mech.key}:{k}:{step_max!r}", [f], build=jit is True)
+        if lib is not None:
+            f = lib[f.name()]
+            compiled = True
+        elif jit is True:
+            warnings.warn("assembly_modes: no compiled step (no C compiler, or compiling is "
+                          "off: OPTKIN_COMPILE); using the CasADi virtual machine (slower)",
+                          stacklevel=3)
+    fm = f.map(width, "thread", threads) if threads > 1 else f.map(width)
+    setup = time.perf_counter() - t0
+    _STEPS[key] = (fm, setup, compiled)
+    return fm, setup, compiled
+
+
+# ---------------------------------------------------------------------------------------------
+# distances between configurations
+# ---------------------------------------------------------------------------------------------
+
+
+def _scaled_dist(model: Model, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """max-norm scaled distances between the columns of X (nx, n) and Y (nx, k), (n, k):
+    angles modulo 2 pi, a quaternion and its negative the same rotation."""
+    if Y.shape[1] == 0 or X.shape[1] == 0:
+        return np.full((X.shape[1], Y.shape[1]), np.inf)
+    s = model.x_scale[:, None, None]
+    D = (X[:, :, None] - Y[:, None, :])
+    ang = model.x_angle
+    if ang.any():
+        D[ang] = wrap_angle(D[ang])
+    D = np.abs(D) / s
+    if model.mech.kind == "legs" and model.mech.platform == "spatial":
+        D2 = np.abs(X[3:7, :, None] + Y[3:7, None, :]) / s[3:7]
+        d_pos = D[:3].max(axis=0)
+        return np.maximum(d_pos, np.minimum(D[3:7].max(axis=0), D2.max(axis=0)))
+    return D.max(axis=0)
+
+
+def _canon(model: Model, X: np.ndarray) -> np.ndarray:
+    X = np.array(X, dtype=float)
+    if model.x_angle.any():
+        X[model.x_angle] = wrap_angle(X[model.x_angle])
+    if model.mech.kind == "legs" and model.mech.platform == "spatial":
+        q = X[3:7] / np.linalg.norm(X[3:7], axis=0)
+        X[3:7] = q * np.where(q[0] < 0, -1.0, 1.0)
+    return X
+
+
+# ---------------------------------------------------------------------------------------------
+# assembly_modes
+# ---------------------------------------------------------------------------------------------
+
+
+def _good_turing(hits: Sequence[int], starts: int) -> dict[str, Any]:
+    h = np.asarray(hits, dtype=int)
+    f1 = int(np.sum(h == 1))
+    f2 = int(np.sum(h == 2))
+    s_obs = int(h.size)
+    chao1 = s_obs + (f1 * f1 / (2.0 * f2) if f2 > 0 else f1 * (f1 - 1) / 2.0)
+    return {
+        "singletons": f1,
+        "doubletons": f2,
+        "p_new": f1 / starts if starts else 1.0,
+        "estimated_total": float(chao1),
+    }
+
+
+def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> SolutionSet:
+    """Every real assembly mode: all distinct solutions x of Phi(q_a, x) = 0.
+
+    Low-discrepancy starts are solved together by Khalil's clamped Newton iteration ([7.55])
+    in one compiled, mapped CasADi Function, deduplicated as they converge (angles modulo
+    2 pi, quaternion sign, a tolerance relative to the mechanism size); IPOPT only rescues
+    stalled starts. See the module docstring for the start distributions and the stopping
+    rules.
+
+    Parameters
+    ----------
+    mech : Mechanism
+        Any mechanism the model describes (Khalil tables included: their passive and cut
+        joints are the unknowns).
+    qa : array (n_actuated,)
+        Active joint values.
+    seed : int
+        Scrambling seed of the Sobol sequence (a run is reproducible from it).
+    **options
+        See :data:`ASSEMBLY_DEFAULTS`: ``starts`` (budget), ``target`` (Good-Turing
+        probability of a new solution at which to stop), ``time_limit`` (s), ``bound``
+        (known maximum count, ``"auto"`` uses :func:`known_bound`), ``tol``, ...
+
+    Returns
+    -------
+    SolutionSet
+        ``kind="assembly modes"``, sorted by the unknowns x. Each :class:`KinResult` carries
+        its residual, the condition number of W_p (``cond``) and in ``stats.extra["hits"]``
+        how many starts converged to it. ``info`` holds the account: ``starts`` (starts run
+        to the end), ``converged``, ``hits`` (per solution), ``singletons``, ``p_new`` (the
+        Good-Turing estimate of the probability that a further start finds a new solution),
+        ``estimated_total`` (Chao1), ``bound`` and ``complete`` (True when the count reached
+        the known bound), ``stop_reason``, ``time`` and ``setup_time`` (compilation).
+
+    Examples
+    --------
+    >>> import optkin
+    >>> m = optkin.mechanisms.five_bar(2.0, 1.5, 2.0, 2.0, 1.5)
+    >>> modes = optkin.assembly_modes(m, [1.2, 1.9])
+    >>> len(modes), modes.info["complete"]
+    (2, True)
+    """
+    opts = merge_options(ASSEMBLY_DEFAULTS, options, "assembly_modes")
+    model = get_model(mech)
+    qa = check_qa(model, qa)
+    t_start = timer()
+    tol = float(opts["tol"])
+    nx = model.nx
+    bound = known_bound(mech) if opts["bound"] == "auto" else opts["bound"]
+    bound = None if bound is None else int(bound)
+    small = nx < 6
+    width = opts["width"]
+    if width == "auto":
+        width = 64 if small else 256
+    width = int(width)
+    if width < 1 or width & (width - 1):
+        raise ValueError(f"assembly_modes: width must be a power of 2, got {width}")
+    jit = opts["jit"]
+    if jit == "auto":
+        jit = "cached" if small else True
+    threads = 1 if small else int(opts["threads"])
+    unroll = 3 if small else 1  # Newton iterations per call: fewer Python round trips
+    budget = int(opts["starts"])
+    min_starts = (256 if small else 2048) if opts["min_starts"] == "auto" \
+        else int(opts["min_starts"])
+    target = float(opts["target"])
+    time_limit = float(opts["time_limit"])
+    max_iter = int(opts["max_iter"])
+    dedup = float(opts["dedup_tol"])
+
+    starts = _Starts(model, qa, int(seed), width)
+    info: dict[str, Any] = {"bound": bound, "width": width}
+    if starts.empty_reason is not None:
+        info.update({"success": False, "message": starts.empty_reason, "starts": 0,
+                     "converged": 0, "hits": [], "p_new": 0.0, "singletons": 0,
+                     "doubletons": 0, "estimated_total": 0.0, "complete": True,
+                     "stop_reason": "infeasible", "time": timer() - t_start,
+                     "setup_time": 0.0, "rescued": 0, "jit": False})
+        return SolutionSet([], "assembly modes", info, seed=int(seed))
+
+    step_max = opts["step_max"]
+    if step_max == "auto":
+        step_max = 1.0 if small else 0.3
+    fmap, setup, compiled = _mapped_step(model, width, float(step_max), unroll, jit, threads)
+    t0 = timer()
+    QA = ca.DM(np.tile(qa[:, None], (1, width)))
+    issued = min(width, budget)
+    X = starts.take(width)
+    live = np.zeros(width, dtype=bool)
+    live[:issued] = True
+    it = np.zeros(width, dtype=int)
+    sols = np.zeros((nx, 0))
+    hits: list[int] = []
+    first_nit: list[int] = []
+    done = converged = 0
+    n_once = 0
+    total_iter = 0
+    excluded = 0
+    excl_res = 1e-5 * max(1.0, model.length)
+    excl_dist = 1e-3
+    stalled_x: list[np.ndarray] = []
+    stalled_r: list[float] = []
+    big = 1e3 * model.x_scale[:, None]
+    stop = None
+    while True:
+        Xn, r = fmap(QA, X)
+        Xn = Xn.full()
+        r = r.full().ravel()
+        total_iter += unroll * int(live.sum())
+        it += unroll
+        finite = np.all(np.isfinite(Xn), axis=0)
+        conv = live & (r <= tol) & finite
+        # exclusion: a start already inside the quadratic-convergence region of a known
+        # solution is counted as a hit of it without iterating to round-off
+        near = live & ~conv & finite & (r <= excl_res)
+        if near.any() and sols.shape[1]:
+            jn = np.flatnonzero(near)
+            Dn = _scaled_dist(model, _canon(model, Xn[:, jn]), sols)
+            kn = np.argmin(Dn, axis=1)
+            inside = Dn[np.arange(jn.size), kn] < excl_dist
+            for k in kn[inside]:
+                hits[k] += 1
+                n_once -= hits[k] == 2
+            excluded_now = np.zeros(width, dtype=bool)
+            excluded_now[jn[inside]] = True
+            converged += int(inside.sum())
+            excluded += int(inside.sum())
+        else:
+            excluded_now = None
+        bad = live & ~conv & (~finite | np.any(np.abs(Xn) > big, axis=0) | (it >= max_iter))
+        if conv.any():
+            idx = np.flatnonzero(conv)
+            C = _canon(model, Xn[:, idx])
+            D = _scaled_dist(model, C, sols)
+            if D.shape[1]:
+                kmin = np.argmin(D, axis=1)
+                known = D[np.arange(idx.size), kmin] < dedup
+                for k in kmin[known]:
+                    hits[k] += 1
+                    n_once -= hits[k] == 2
+            else:
+                known = np.zeros(idx.size, dtype=bool)
+            unk = np.flatnonzero(~known)
+            if unk.size:  # new solutions, clustered among themselves
+                Cu = C[:, unk]
+                Du = _scaled_dist(model, Cu, Cu)
+                rep = np.full(unk.size, -1)
+                for j in range(unk.size):
+                    if rep[j] >= 0:
+                        continue
+                    same = (Du[j] < dedup) & (rep < 0)
+                    rep[same] = j
+                    sols = np.hstack([sols, Cu[:, j:j + 1]])
+                    cnt = int(same.sum())
+                    hits.append(cnt)
+                    n_once += cnt == 1
+                    first_nit.append(int(it[idx[unk[j]]]))
+            converged += idx.size
+        if bad.any():
+            for col in np.flatnonzero(bad):
+                if np.isfinite(r[col]) and finite[col]:
+                    stalled_x.append(Xn[:, col].copy())
+                    stalled_r.append(float(r[col]))
+        fin = conv | bad
+        if excluded_now is not None:
+            fin |= excluded_now
+        done += int(fin.sum())
+        X = Xn
+        # stopping rules
+        if bound is not None and len(hits) >= bound:
+            stop = "bound"
+        elif done >= min_starts and n_once <= target * done:
+            stop = "target"
+        elif timer() - t0 > time_limit:
+            stop = "time_limit"
+        if stop:
+            break
+        # refill finished columns with fresh starts
+        free = np.flatnonzero(fin | ~live)
+        n_new = min(free.size, budget - issued)
+        if n_new > 0:
+            cols = free[:n_new]
+            X[:, cols] = starts.take(n_new)
+            it[cols] = 0
+            live[cols] = True
+            issued += n_new
+        if free.size > n_new:
+            live[free[n_new:]] = False
+            X[:, ~live] = 1.0  # parked columns: harmless finite values
+        if not live.any():
+            stop = "budget"
+            break
+    t_newton = timer() - t0
+
+    # IPOPT rescues of stalled starts (best residuals first, away from known solutions)
+    rescued = 0
+    n_rescue = int(opts["rescue"])
+    if stop != "bound" and n_rescue > 0 and stalled_x:
+        order = np.argsort(stalled_r)
+        cand = np.array(stalled_x)[order].T
+        cand = cand[:, np.array(stalled_r)[order] < 1e-2 * max(1.0, model.length)]
+        tried = 0
+        solver = model.nlp() if cand.shape[1] else None
+        for j in range(cand.shape[1]):
+            if tried >= n_rescue or (bound is not None and len(hits) >= bound):
+                break
+            x0 = cand[:, j]
+            if sols.shape[1] and _scaled_dist(model, _canon(model, x0[:, None]), sols).min() < 1e-3:
+                continue
+            tried += 1
+            sol = solver(x0=x0, p=np.concatenate([qa, x0]), lbg=0, ubg=0)
+            x1, res1, _, ok = newton(model, qa, np.array(sol["x"]).ravel(), tol, 8)
+            if not ok:
+                continue
+            c1 = _canon(model, x1[:, None])
+            d = _scaled_dist(model, c1, sols)
+            if d.size and d.min() < dedup:
+                hits[int(np.argmin(d))] += 1
+            else:
+                sols = np.hstack([sols, c1])
+                hits.append(1)
+                first_nit.append(max_iter)
+                rescued += 1
+            converged += 1
+
+    # results, sorted by x
+    order = sorted(range(len(hits)), key=lambda k: tuple(np.round(sols[:, k] / model.x_scale, 9)))
+    elapsed = timer() - t_start
+    out: list[KinResult] = []
+    for k in order:
+        x = sols[:, k]
+        stats = SolverStats("newton-multistart", setup, t_newton, first_nit[k], "converged",
+                            {"hits": hits[k], "jit": compiled})
+        kr = make_result(model, qa, x, tol, first_nit[k], stats)
+        if not kr.success:  # polish (never expected: converged columns are at tol)
+            x, _, nit, _ = newton(model, qa, x, tol, 5)
+            kr = make_result(model, qa, x, tol, first_nit[k] + nit, stats)
+        out.append(kr)
+    hits_sorted = [hits[k] for k in order]
+    gt = _good_turing(hits_sorted, done)
+    complete = bound is not None and len(out) >= bound
+    msg = (f"{len(out)} assembly modes from {done} starts ({converged} converged); "
+           + (f"complete: the known bound {bound} is reached" if complete else
+              f"Good-Turing probability that a further start finds a new one: {gt['p_new']:.2g}")
+           + f"; stopped by {stop}")
+    info.update({
+        "success": bool(out) and all(s.success for s in out),
+        "message": msg,
+        "starts": done,
+        "issued": issued,
+        "converged": converged,
+        "hits": hits_sorted,
+        **gt,
+        "complete": complete,
+        "stop_reason": stop,
+        "time": elapsed,
+        "newton_time": t_newton,
+        "setup_time": setup,
+        "iterations": total_iter,
+        "rescued": rescued,
+        "excluded": excluded,
+        "jit": compiled,
+    })
+    return SolutionSet(out, "assembly modes", info, seed=int(seed))
+
+
+# ---------------------------------------------------------------------------------------------
+# track
+# ---------------------------------------------------------------------------------------------
+
+
+def _scaled_wp(model: Model, qa: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    phi, Wp, Wa = model.jac(qa, x)
+    Wp = np.array(Wp) * model.x_scale[None, :]
+    return np.array(phi).ravel(), Wp, np.array(Wa)
+
+
+def _det_cond(Wp: np.ndarray) -> tuple[float, float]:
+    if Wp.shape[0] != Wp.shape[1]:
+        s = np.linalg.svd(Wp, compute_uv=False)
+        return float(s[-1]), float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    det = float(np.linalg.det(Wp))
+    try:
+        cond = float(np.linalg.cond(Wp))
+    except np.linalg.LinAlgError:
+        cond = float("inf")
+    return det, cond
+
+
+def _corrector(model: Model, qa: np.ndarray, x: np.ndarray, tol: float, max_iter: int,
+               max_move: float):
+    """Plain Newton from x. Returns (x, ok, iterations, W_p, W_a at x); fails when it does
+    not converge in ``max_iter`` iterations or moves more than ``max_move`` (scaled)."""
+    x0 = x.copy()
+    s = model.x_scale
+    for k in range(max_iter + 1):
+        phi, Wp, Wa = model.jac(qa, x)
+        phi = phi.full().ravel()
+        Wp = Wp.full()
+        if np.max(np.abs(phi)) <= tol:
+            return x, True, k, Wp, Wa.full()
+        if k == max_iter:
+            break
+        try:
+            if Wp.shape[0] == Wp.shape[1]:
+                dx = -np.linalg.solve(Wp, phi)
+            else:
+                dx = -np.linalg.lstsq(Wp, phi, rcond=None)[0]
+        except np.linalg.LinAlgError:
+            break
+        x = x + dx
+        if not np.all(np.isfinite(x)) or np.max(np.abs(x - x0) / s) > max_move:
+            break
+    return x, False, max_iter, None, None
+
+
+def _tangent(Wp: np.ndarray, Wa: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    """dx = -W_p^-1 W_a dq_a ([7.49]); least squares when W_p is not square."""
+    try:
+        if Wp.shape[0] == Wp.shape[1]:
+            return -np.linalg.solve(Wp, Wa @ dq)
+        return -np.linalg.lstsq(Wp, Wa @ dq, rcond=None)[0]
+    except np.linalg.LinAlgError:
+        return np.zeros(Wp.shape[1])
+
+
+def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> SolutionSet:
+    """Follow one assembly mode along a path of actuated values.
+
+    Predictor-corrector continuation: the tangent dx = -W_p^-1 W_a dq_a ([7.49]) predicts,
+    a few plain Newton iterations correct. A sub-step is halved (down to ``min_step`` of a
+    segment) when the corrector fails, when it has to move the prediction by more than
+    ``contraction`` times the predicted move (the solution is not the smooth continuation:
+    near a singularity two modes come close), or when det W_p changes sign. The path stops
+    with status ``"singular"`` where det W_p changes sign (a parallel singularity is crossed:
+    continuing would change the assembly mode), where cond(W_p) (columns scaled by the
+    mechanism size) exceeds ``cond_max``, or where the halving runs out next to a
+    near-singular configuration (the mode ends at a fold); with ``"iteration_limit"`` where
+    the corrector fails away from any singularity (e.g. the legs cannot close).
+
+    Parameters
+    ----------
+    mech : Mechanism
+    qa_path : array (N, n_actuated)
+        The actuated values along the path.
+    guess : optional
+        Selects the assembly mode at ``qa_path[0]``: a :class:`KinResult` (e.g. one of
+        :func:`assembly_modes`), x, all joints, or (platforms) a pose; None: the home.
+    **options
+        See :data:`TRACK_DEFAULTS`.
+
+    Returns
+    -------
+    SolutionSet
+        ``kind="path"``: one :class:`KinResult` per path point reached. ``info``: ``status``
+        (``"optimal"`` when the whole path was followed), ``success``, ``stopped_at`` (index of
+        the first point not reached, None when complete), ``s_stop`` (fraction of the segment
+        into it where the path stopped, or where det W_p crosses zero, interpolated),
+        ``qa_stop``, ``message``, ``det`` and ``cond`` (of the scaled W_p at each point
+        reached), ``halvings``.
+
+    Examples
+    --------
+    >>> import numpy as np, optkin
+    >>> m = optkin.mechanisms.five_bar(2.0, 1.5, 2.0, 2.0, 1.5)
+    >>> path = np.column_stack([np.linspace(1.2, 1.4, 11), np.full(11, 1.9)])
+    >>> r = optkin.track(m, path, [0.9, 2.3])
+    >>> r.info["status"], len(r)
+    ('optimal', 11)
+    """
+    opts = merge_options(TRACK_DEFAULTS, options, "track")
+    model = get_model(mech)
+    try:
+        P = np.asarray(qa_path, dtype=float)
+    except (TypeError, ValueError):
+        raise MechanismError(f"qa_path: expected an array of shape (N, {model.na})") from None
+    if P.ndim == 1 and model.na == 1:
+        P = P[:, None]
+    if P.ndim != 2 or P.shape[1] != model.na or P.shape[0] < 1:
+        raise MechanismError(
+            f"qa_path: expected an array of shape (N, {model.na}) (one row of "
+            f"{list(mech.active_names)} per path point), got shape {P.shape}"
+        )
+    for k in range(P.shape[0]):
+        check_qa(model, P[k])
+    tol = float(opts["tol"])
+    max_iter = int(opts["max_iter"])
+    min_step = float(opts["min_step"])
+    cond_max = float(opts["cond_max"])
+    cond_near = float(opts["cond_near"])
+    max_move = float(opts["max_correction"])
+    contraction = float(opts["contraction"])
+    scale = model.x_scale
+    t0 = timer()
+    x0 = parse_guess(model, P[0], guess)
+    x, r, nit, ok = newton(model, P[0], x0, tol, 50)
+    pts: list[KinResult] = []
+    dets: list[float] = []
+    conds: list[float] = []
+    halvings = 0
+
+    def record(qa_k: np.ndarray, x_k: np.ndarray, nit_k: int) -> None:
+        stats = SolverStats("continuation", 0.0, timer() - t0, nit_k, "converged")
+        pts.append(make_result(model, qa_k, x_k, tol, nit_k, stats))
+
+    status, msg, stopped, s_stop, qa_stop = "optimal", "", None, None, None
+    Wp = Wa = None
+    if not ok:
+        status = "iteration_limit" if np.isfinite(r) else "error"
+        msg = (f"no closed configuration near the guess at qa_path[0] (max |Phi| = {r:.2e}); "
+               "give another guess, e.g. a result of assembly_modes")
+        stopped, s_stop, qa_stop = 0, 0.0, P[0]
+    else:
+        _, Wp, Wa = model.jac(P[0], x)
+        Wp, Wa = Wp.full(), Wa.full()
+        det, cond = _det_cond(Wp * scale)
+        dets.append(det)
+        conds.append(cond)
+        record(P[0], x, nit)
+        if cond > cond_max:
+            status, stopped, s_stop, qa_stop = "singular", 1, 0.0, P[0]
+            msg = f"the start qa_path[0] is singular (cond W_p = {cond:.2e} > {cond_max:.1e})"
+    det_scale = abs(dets[0]) if dets else 1.0
+    k = 1
+    h = 1.0
+    slope: float | None = None
+    while status == "optimal" and k < P.shape[0]:
+        qa_prev, qa_next = P[k - 1], P[k]
+        dqa = qa_next - qa_prev
+        s = 0.0
+        x_seg, Wp_seg, Wa_seg, det_prev, nit_seg = x, Wp, Wa, dets[-1], 0
+        seg_len = float(np.linalg.norm(dqa)) or 1.0
+        h = 1.0
+        while s < 1.0:
+            h = min(h, 1.0 - s)
+            # det W_p extrapolated along the path (secant slope of the last accepted steps):
+            # a predicted sign change within the step means a singularity ahead, approached
+            # by halving so that a crossing of two modes there is not passed unnoticed
+            ahead = slope is not None and np.sign(det_prev + slope * h * seg_len) != np.sign(det_prev)
+            if ahead and h > min_step:
+                h *= 0.5
+                halvings += 1
+                continue
+            dx_pred = _tangent(Wp_seg, Wa_seg, h * dqa)
+            x_pred = x_seg + dx_pred
+            x_try, ok, nk, Wp_t, Wa_t = _corrector(model, qa_prev + (s + h) * dqa, x_pred, tol,
+                                                    max_iter, max_move)
+            nit_seg += nk
+            crossed = smooth = False
+            if ok:
+                det_t, cond_t = _det_cond(Wp_t * scale)
+                crossed = Wp_t.shape[0] == Wp_t.shape[1] and np.sign(det_t) != np.sign(det_prev)
+                pred = float(np.max(np.abs(dx_pred) / scale))
+                corr = float(np.max(np.abs(x_try - x_pred) / scale))
+                smooth = corr <= contraction * pred + 1e-7
+            if ok and smooth and not crossed and not ahead and cond_t <= cond_max:
+                s += h
+                slope = (det_t - det_prev) / (h * seg_len)
+                x_seg, Wp_seg, Wa_seg, det_prev = x_try, Wp_t, Wa_t, det_t
+                det_scale = max(det_scale, abs(det_t))
+                h = min(1.0, 2.0 * h)
+                continue
+            if h > min_step:
+                h *= 0.5
+                halvings += 1
+                continue
+            # cannot go on: classify
+            stopped = k
+            if ok and crossed:
+                frac = abs(det_prev) / (abs(det_prev) + abs(det_t))
+                s_stop = s + frac * h
+                status = "singular"
+                msg = (f"det W_p changes sign between qa_path[{k - 1}] and qa_path[{k}] "
+                       f"(at s = {s_stop:.4f} of the segment): a parallel singularity; "
+                       "continuing would change the assembly mode")
+            elif ahead:
+                s_stop = min(1.0, s + abs(det_prev / slope) / seg_len)
+                status = "singular"
+                msg = (f"det W_p = {det_prev:.2e} is about to change sign between "
+                       f"qa_path[{k - 1}] and qa_path[{k}] (at s = {s_stop:.4f} of the segment, "
+                       "extrapolated): a parallel singularity where two assembly modes meet")
+            elif ok and cond_t > cond_max:
+                s_stop = s + h
+                status = "singular"
+                msg = (f"cond W_p = {cond_t:.2e} exceeds cond_max = {cond_max:.1e} between "
+                       f"qa_path[{k - 1}] and qa_path[{k}] (s = {s_stop:.4f})")
+            else:
+                s_stop = s
+                det_l, cond_l = _det_cond(Wp_seg * scale)
+                near = cond_l > cond_near or abs(det_l) < 1e-2 * det_scale
+                status = "singular" if near else "iteration_limit"
+                msg = (f"no smooth continuation past s = {s:.4f} of the segment from "
+                       f"qa_path[{k - 1}] to qa_path[{k}] (cond W_p there {cond_l:.2e}): "
+                       + ("the assembly mode meets a parallel singularity (two modes merge)"
+                          if near else "no nearby closed configuration (the legs may not close)"))
+            qa_stop = qa_prev + s_stop * dqa
+            break
+        if status != "optimal":
+            break
+        x, Wp, Wa = x_seg, Wp_seg, Wa_seg
+        dets.append(det_prev)
+        conds.append(cond_t)
+        record(qa_next, x, nit_seg)
+        k += 1
+    if status == "optimal":
+        msg = f"followed all {P.shape[0]} path points in one assembly mode"
+    info = {
+        "success": status == "optimal",
+        "status": status,
+        "message": msg,
+        "stopped_at": stopped,
+        "s_stop": s_stop,
+        "qa_stop": None if qa_stop is None else np.asarray(qa_stop).tolist(),
+        "points": int(P.shape[0]),
+        "reached": len(pts),
+        "det": dets,
+        "cond": conds,
+        "halvings": halvings,
+        "time": timer() - t0,
+    }
+    return SolutionSet(pts, "path", info)
+
+
+# ---------------------------------------------------------------------------------------------
+# working modes
+# ---------------------------------------------------------------------------------------------
+
+_B_SIGNS = {"RPR": (-1,), "UPS": (-1,), "SPS": (-1,), "RRR": (-1, 1), "RUS": (-1, 1),
+            "RSS": (-1, 1)}
+
+
+@dataclass
+class WorkingModes:
+    """The working modes of a fully parallel mechanism (Chablat and Wenger, Definition 4).
+
+    Attributes
+    ----------
+    modes : list of tuple
+        Every sign pattern of (B_11, ..., B_nn) the legs allow: 2 signs for a leg whose
+        actuated joint is a revolute (RRR, RUS, RSS: elbow up or down), 1 for a prismatic
+        leg (B_jj = -1 for f_j = |P_j - A_j| - rho_j).
+    legs : list of str
+        The leg types.
+    pose : ndarray or None
+        The pose at which existence was checked.
+    existing : dict or None
+        At ``pose``: sign pattern -> the :class:`KinResult` of that posture (from
+        :func:`optkin.inverse`); patterns absent here do not reach the pose.
+    """
+
+    modes: list[tuple[int, ...]]
+    legs: list[str]
+    pose: np.ndarray | None = None
+    existing: dict[tuple[int, ...], KinResult] | None = field(default=None)
+
+    def __len__(self) -> int:
+        return len(self.modes)
+
+    def __iter__(self) -> Iterator[tuple[int, ...]]:
+        return iter(self.modes)
+
+    def summary(self) -> str:
+        s = f"{len(self.modes)} working modes"
+        if self.existing is not None:
+            s += f", {len(self.existing)} reach the pose"
+        return s
+
+    def __repr__(self) -> str:
+        return f"WorkingModes({self.summary()})"
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "count": len(self.modes),
+            "modes": [list(m) for m in self.modes],
+            "legs": list(self.legs),
+            "summary": self.summary(),
+            "success": True,
+        }
+        if self.existing is not None:
+            out["pose"] = None if self.pose is None else np.asarray(self.pose).tolist()
+            out["existing"] = [list(m) for m in self.existing]
+            out["postures"] = [r.to_dict() for r in self.existing.values()]
+            out["count_at_pose"] = len(self.existing)
+        return out
+
+
+def working_modes(mech: Mechanism, pose: Any = None) -> WorkingModes:
+    """The working modes (sign patterns of diag B, seed 004) of a fully parallel mechanism.
+
+    Parameters
+    ----------
+    mech : Mechanism
+        A leg-described platform (one actuated joint per leg, so B = W_a is diagonal).
+    pose : optional
+        A 4x4 pose or task coordinates; then :func:`optkin.inverse` finds the postures there
+        and ``existing`` maps each sign pattern reached to its posture.
+
+    Returns
+    -------
+    WorkingModes
+
+    Examples
+    --------
+    >>> import optkin
+    >>> m = optkin.mechanisms.five_bar(2.0, 1.5, 2.0, 2.0, 1.5)
+    >>> wm = optkin.working_modes(m, pose=[1.0, 1.8])
+    >>> len(wm), len(wm.existing)
+    (4, 4)
+    """
+    if mech.kind != "legs":
+        raise MechanismError(
+            f"{mech.name}: working modes are defined for fully parallel mechanisms (one "
+            "actuated joint per independent leg, seed 004); describe it with "
+            "Mechanism.from_legs"
+        )
+    signs = [_B_SIGNS.get(leg.type, (-1, 1)) for leg in mech.legs]
+    modes = [tuple(int(v) for v in m) for m in itertools.product(*signs)]
+    wm = WorkingModes(modes, [leg.type for leg in mech.legs])
+    if pose is not None:
+        from .inverse import inverse
+
+        sols = inverse(mech, pose)
+        wm.pose = np.asarray(pose, dtype=float)
+        wm.existing = {}
+        for s in sols:
+            if s.working_mode is not None and s.working_mode not in wm.existing:
+                wm.existing[tuple(s.working_mode)] = s
+    return wm
+
