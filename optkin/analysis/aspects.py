@@ -560,7 +560,8 @@ def _plot_curves(res: SingularCurves, path=None, ax=None, title=None):
         ax = axs[0, 0]
     for c in res.curves:
         col = _COLORS.get(c.kind.split(":")[0], "k")
-        for P in _split_wrapped(c.points, res.periodic):
+        for P in _split_wrapped(np.vstack([c.points, c.points[:1]]) if c.closed else c.points,
+                                res.periodic):
             ax.plot(P[:, 0], P[:, 1], color=col, lw=1.0)
     if len(res.branch_points):
         i0, i1 = res.info["plane_index"]

@@ -122,7 +122,11 @@ class _System:
         self.nz = len(self.free_idx)
         self.GJw = ca.Function("GJw", [w], [ca.vertcat(G, ca.vec(J))])
         # labels of a full point v: det W_p and diag W_a
-        self.aux = ca.Function("aux", [v], [ca.det(Wp), ca.diag(Wa)])
+        if mech.kind == "legs":
+            bdiag = ca.vertcat(*[Wa[j, j] for j in range(na)])
+        else:
+            bdiag = ca.SX.zeros(na, 1)
+        self.aux = ca.Function("aux", [v], [ca.det(Wp), bdiag])
         self.cfun = None if c is None else ca.Function("c", [v, lim], [c])
         self._maps: dict[int, Any] = {}
 
@@ -247,7 +251,8 @@ class SingularCurves:
         for c in self.curves:
             if kind is not None and not c.kind.startswith(kind):
                 continue
-            out += _split_wrapped(c.points, self.periodic)
+            P = np.vstack([c.points, c.points[:1]]) if c.closed else c.points
+            out += _split_wrapped(P, self.periodic)
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -410,7 +415,7 @@ class _Tracer:
             if un is None:
                 h *= 0.5
                 if h < self.hmin:
-                    return pts, "stalled"
+                    return pts, self._stall_kind(u)
                 continue
             Jn = self.last_J
             tn = self.tangent(Jn)
@@ -420,7 +425,7 @@ class _Tracer:
             if tn @ t < np.cos(0.25) or step > 2 * h:
                 h *= 0.5
                 if h < self.hmin:
-                    return pts, "stalled"
+                    return pts, self._stall_kind(u)
                 continue
             d_new = self.aug_det(Jn, tn)
             if d_prev * d_new < 0:
@@ -449,6 +454,22 @@ class _Tracer:
             elif nit >= 6:
                 h *= 0.7
         return pts, "max_steps"
+
+    def _stall_kind(self, u: np.ndarray) -> str:
+        """'boundary' when the curve stopped on the box (e.g. a leg length reaching 0,
+        where |P - A| is not differentiable), else 'stalled'."""
+        for j, k in enumerate(self.pz):
+            if self.box_periodic[j]:
+                continue
+            lo, hi = self.bounds[j]
+            val = u[k] * self.scl[k]
+            if min(abs(val - lo), abs(val - hi)) < 1e-3 * (hi - lo):
+                return "boundary"
+        v = u * self.scl
+        for k, i in enumerate(self.free):
+            if i < self.sys.na and not self.sys.periodic[i] and abs(v[k]) < 1e-3 * self.sys.model.length:
+                return "degenerate"  # a leg length reaches 0: the model row is not smooth
+        return "stalled"
 
     def _to_boundary(self, u_in: np.ndarray, u_out: np.ndarray) -> np.ndarray | None:
         """The curve point on the box edge between an inside and an outside point."""
@@ -989,6 +1010,8 @@ def singular_curves(
             messages.append(f"{cond}: no seed found")
         traced = _trace_all(tr, seeds_u, dedup=0.3 * hmax)
         for Z, closed, ends in traced:
+            if len(Z) < 2:
+                continue
             U = Z * tr.scl
             V = np.empty((len(U), sys.nv))
             V[:, list(sys.free_idx)] = U

@@ -1,0 +1,411 @@
+"""Singular curves by continuation, checked against closed forms and brute-force grids.
+
+Independent evidence: the five-bar's A and B of Chablat & Wenger (seed 004, eqs. 7b-7c) and
+its inverse kinematics written out by hand; the four-bar loop equation of Modern Robotics
+7.3 (seed 001, L1 = L2 = 4, L3 = L4 = 2); the 3-RPR's A written out by hand, with finite
+differences for the cusp condition. Grids are computed here, in numpy, never by optkin.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import optkin
+from optkin.analysis.continuation import singular_curves
+
+L0, L1, L2, L3, L4 = 9.0, 8.0, 5.0, 5.0, 8.0
+BASE_B = np.array([L0, 0.0])
+
+
+def wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def cross(u, w):
+    return u[..., 0] * w[..., 1] - u[..., 1] * w[..., 0]
+
+
+def u2(t):
+    return np.stack([np.cos(t), np.sin(t)], -1)
+
+
+def seg_dist(P, Q, periodic=False):
+    """Distance from every point P (k, 2) to the polyline Q (n, 2)."""
+    A, B = Q[:-1], Q[1:]
+    d = B - A
+    if periodic:
+        d = wrap(d)
+    out = np.empty(len(P))
+    for s in range(0, len(P), 500):
+        W = P[s:s + 500, None, :] - A[None]
+        if periodic:
+            W = wrap(W)
+        L2_ = np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)
+        t = np.clip(np.einsum("kij,ij->ki", W, d) / L2_, 0, 1)
+        E = W - t[..., None] * d[None]
+        out[s:s + 500] = np.sqrt(np.min(np.einsum("kij,kij->ki", E, E), axis=1))
+    return out
+
+
+def dist_to_curves(P, curves, periodic=False):
+    """Distance to the traced curves (closed ones closed)."""
+    polys = [np.vstack([c.points, c.points[:1]]) if c.closed else c.points for c in curves]
+    return np.min([seg_dist(P, Q, periodic) for Q in polys if len(Q) > 1], axis=0)
+
+
+@pytest.fixture(scope="module")
+def five_bar():
+    return optkin.mechanisms.five_bar(L0, L1, L2, L3, L4)
+
+
+def fb_ik(P, s1, s2):
+    """Hand-written inverse kinematics of the five-bar, posture signs s1, s2."""
+    r1 = np.hypot(P[..., 0], P[..., 1])
+    dB = P - BASE_B
+    r2 = np.hypot(dB[..., 0], dB[..., 1])
+    c1 = (r1**2 + L1**2 - L2**2) / (2 * r1 * L1)
+    c2 = (r2**2 + L4**2 - L3**2) / (2 * r2 * L4)
+    ok = (np.abs(c1) <= 1) & (np.abs(c2) <= 1)
+    t1 = np.arctan2(P[..., 1], P[..., 0]) + s1 * np.arccos(np.clip(c1, -1, 1))
+    t2 = np.arctan2(dB[..., 1], dB[..., 0]) + s2 * np.arccos(np.clip(c2, -1, 1))
+    return t1, t2, ok
+
+
+def fb_AB(t1, t2, P):
+    """det A (seed 004 eq. 7b) and the B_jj (eq. 7c) up to positive factors."""
+    C = L1 * u2(t1)
+    D = BASE_B + L4 * u2(t2)
+    detA = cross(P - C, P - D)
+    b1 = cross(C, P - C)            # L1 L2 sin(theta3 - theta1)
+    b2 = cross(D - BASE_B, P - D)   # L3 L4 sin(theta4 - theta2)
+    return detA, b1, b2
+
+
+def test_five_bar_parallel_points_satisfy_closed_form(five_bar):
+    for plane in ("joint", "workspace"):
+        r = singular_curves(five_bar, plane=plane, kind="parallel")
+        assert r.success, r.message
+        assert r.max_residual < 1e-9
+        V = np.vstack([c.v for c in r.curves])
+        t1, t2, P = V[:, 0], V[:, 1], V[:, 2:4]
+        C, D = L1 * u2(t1), BASE_B + L4 * u2(t2)
+        # the closure, by hand
+        assert np.max(np.abs(np.linalg.norm(P - C, axis=1) - L2)) < 1e-9
+        assert np.max(np.abs(np.linalg.norm(P - D, axis=1) - L3)) < 1e-9
+        # C, D and P aligned (seed 004, section 3.2)
+        assert np.max(np.abs(cross(P - C, P - D))) < 1e-8
+        # all curves close (angles periodic, workspace bounded)
+        assert all(c.closed for c in r.curves)
+
+
+def test_five_bar_parallel_vs_workspace_grid(five_bar):
+    """Sign changes of det A on a fine grid per working mode lie on the traced curves,
+    and every traced point has a grid sign change nearby."""
+    r = singular_curves(five_bar, plane="workspace", kind="parallel")
+    n = 500
+    xs = np.linspace(-4.5, 13.5, n)
+    ys = np.linspace(-13.0, 13.0, n)
+    h = max(xs[1] - xs[0], ys[1] - ys[0])
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    P = np.stack([X, Y], -1)
+    V = np.vstack([c.v for c in r.curves])
+    Pt = V[:, 2:4]
+    dA_t, b1_t, b2_t = fb_AB(V[:, 0], V[:, 1], Pt)
+    for s1 in (1, -1):
+        for s2 in (1, -1):
+            t1, t2, ok = fb_ik(P, s1, s2)
+            d, b1, b2 = fb_AB(t1, t2, P)
+            mode = (np.sign(b1[ok][0]), np.sign(b2[ok][0]))
+            d = np.where(ok, d, np.nan)
+            cr = []
+            for a, b, pa, pb in ((d[:-1], d[1:], P[:-1], P[1:]), (d[:, :-1], d[:, 1:], P[:, :-1], P[:, 1:])):
+                hit = np.isfinite(a) & np.isfinite(b) & (a * b < 0)
+                s = (a[hit] / (a[hit] - b[hit]))[:, None]
+                cr.append(pa[hit] + s * (pb[hit] - pa[hit]))
+            cr = np.vstack(cr)
+            assert len(cr) > 100
+            sel = (np.sign(b1_t) == mode[0]) & (np.sign(b2_t) == mode[1])
+            dist = dist_to_curves(cr, r.curves)
+            assert dist.max() < 1.5 * h, (s1, s2, dist.max(), h)
+            # vice versa: traced points of this working mode, away from the boundary of W
+            Q = Pt[sel]
+            tq1, tq2, okq = fb_ik(Q, s1, s2)
+            inner = np.ones(len(Q), dtype=bool)
+            for dx, dy in ((2 * h, 0), (-2 * h, 0), (0, 2 * h), (0, -2 * h)):
+                inner &= fb_ik(Q + [dx, dy], s1, s2)[2]
+            dq = np.min(np.linalg.norm(Q[inner][:, None, :] - cr[None], axis=2), axis=1)
+            assert inner.sum() > 20
+            assert dq.max() < 2 * h, (s1, s2, dq.max())
+
+
+def test_five_bar_joint_space_vs_grid(five_bar):
+    """In the joint space the parallel locus is |C - D| = L2 + L3 (P between C and D) or
+    C = D (the coupler circle, projected to two points) - seed 004, section 3.2."""
+    r = singular_curves(five_bar, plane="joint", kind="parallel")
+    V = np.vstack([c.v for c in r.curves])
+    C, D = L1 * u2(V[:, 0]), BASE_B + L4 * u2(V[:, 1])
+    g = np.linalg.norm(C - D, axis=1)
+    assert np.all((np.abs(g - (L2 + L3)) < 1e-8) | (g < 1e-8))
+    # the two degenerate configurations C = D are found (intersections of the circles)
+    deg = V[g < 1e-8]
+    assert len(deg) > 10
+    yC = np.sqrt(L1**2 - (L0 / 2) ** 2)
+    Cs = L1 * u2(deg[:, 0])
+    assert np.allclose(np.abs(Cs[:, 1]), yC, atol=1e-8)
+    assert {np.sign(c) for c in Cs[:, 1]} == {1.0, -1.0}
+    # brute force on the torus: sign changes of |C - D| - (L2 + L3)
+    n = 400
+    th = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    T1, T2 = np.meshgrid(th, th, indexing="ij")
+    G = np.linalg.norm(L1 * u2(T1) - BASE_B - L4 * u2(T2), axis=-1) - (L2 + L3)
+    Q = np.stack([T1, T2], -1)
+    cr = []
+    for a, b, pa, pb in ((G, np.roll(G, -1, 0), Q, np.roll(Q, -1, 0)),
+                         (G, np.roll(G, -1, 1), Q, np.roll(Q, -1, 1))):
+        hit = a * b < 0
+        s = (a[hit] / (a[hit] - b[hit]))[:, None]
+        cr.append(pa[hit] + s * wrap(pb[hit] - pa[hit]))
+    cr = np.vstack(cr)
+    h = 2 * np.pi / n
+    dist = dist_to_curves(cr, [c for c in r.curves if np.ptp(c.points[:, 0]) > 1e-6],
+                          periodic=True)
+    assert dist.max() < 1.5 * h
+    main = V[np.abs(g - (L2 + L3)) < 1e-8][:, :2]
+    back = np.min(np.linalg.norm(wrap(main[:, None, :] - cr[None]), axis=2), axis=1)
+    assert back.max() < 2 * h
+
+
+def test_five_bar_serial_curves(five_bar):
+    """B_jj = 0: A, C, P aligned (|AP| = L1 +- L2) or B, D, P aligned (seed 004, 3.3)."""
+    r = singular_curves(five_bar, plane="workspace", kind="serial")
+    assert r.success and r.max_residual < 1e-9
+    for c in r.curves:
+        P = c.v[:, 2:4]
+        if c.kind == "serial:0":
+            d = np.linalg.norm(P, axis=1)
+            radii = (L1 + L2, abs(L1 - L2))
+        else:
+            d = np.linalg.norm(P - BASE_B, axis=1)
+            radii = (L3 + L4, abs(L3 - L4))
+        assert np.all(np.min([np.abs(d - rr) for rr in radii], axis=0) < 1e-9)
+    # every circle (outer and inner, both legs) is present
+    for k, base in ((0, np.zeros(2)), (1, BASE_B)):
+        ds = np.concatenate([np.linalg.norm(c.v[:, 2:4] - base, axis=1)
+                             for c in r.curves if c.kind == f"serial:{k}"])
+        assert np.any(np.abs(ds - 13) < 1e-9) and np.any(np.abs(ds - 3) < 1e-9)
+
+
+def test_four_bar_cspace_through_bifurcations():
+    """MR 7.3, Fig. 7.5: L1 = L2 = 4, L3 = L4 = 2; the C-space curve in (theta, phi) with
+    its bifurcation points, every branch followed."""
+    Lc, Lk, Lr, Lg = 4.0, 4.0, 2.0, 2.0
+    m = optkin.mechanisms.four_bar(Lc, Lk, Lr, Lg)
+    r = singular_curves(m, plane=("theta", "phi"))
+    assert r.success, r.message
+    assert r.max_residual < 1e-9
+
+    def f(t, p):  # |C - B|^2 - L2^2, B = crank tip, C = rocker tip
+        B = Lc * u2(t)
+        C = np.array([Lg, 0.0]) + Lr * u2(p)
+        return np.sum((C - B) ** 2, axis=-1) - Lk**2
+
+    P = np.vstack([c.points for c in r.curves])
+    assert np.max(np.abs(f(P[:, 0], P[:, 1]))) < 1e-8
+    # bifurcation points: the gradient of f vanishes (closed form, by central differences)
+    assert len(r.branch_points) >= 2
+    i0, i1 = r.info["plane_index"]
+    for b in r.branch_points:
+        t, p = b[i0], b[i1]
+        e = 1e-6
+        gt = (f(t + e, p) - f(t - e, p)) / (2 * e)
+        gp = (f(t, p + e) - f(t, p - e)) / (2 * e)
+        assert abs(f(t, p)) < 1e-8 and np.hypot(gt, gp) < 1e-5
+    # brute force: every sign change of f on a grid is near a traced curve, and back
+    n = 300
+    th = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    T, Ph = np.meshgrid(th, th, indexing="ij")
+    F = f(T, Ph)
+    Q = np.stack([T, Ph], -1)
+    cr = []
+    for a, b, pa, pb in ((F, np.roll(F, -1, 0), Q, np.roll(Q, -1, 0)),
+                         (F, np.roll(F, -1, 1), Q, np.roll(Q, -1, 1))):
+        hit = a * b < 0
+        s = (a[hit] / (a[hit] - b[hit]))[:, None]
+        cr.append(pa[hit] + s * wrap(pb[hit] - pa[hit]))
+    cr = np.vstack(cr)
+    h = 2 * np.pi / n
+    dist = dist_to_curves(cr, r.curves, periodic=True)
+    assert dist.max() < 1.5 * h
+    # the branch phi = pi (rocker folded onto the ground link) has no sign change of f
+    # (f >= 0 near it); check the others come back to the grid
+    away = np.abs(wrap(P[:, 1] - np.pi)) > 3 * h
+    back = np.min(np.linalg.norm(wrap(P[away][:, None, :] - cr[None]), axis=2), axis=1)
+    assert back.max() < 2 * h
+
+
+# ----------------------------------------------------------------------------- 3-RPR
+
+D1, D2, D3 = 17.04, 16.54, 20.84
+BASE3 = np.array([[0.0, 0.0], [15.91, 0.0], [0.0, 10.0]])
+_al = np.arccos((D1**2 + D3**2 - D2**2) / (2 * D1 * D3))
+PLAT3 = np.array([[0.0, 0.0], [D1, 0.0], [D3 * np.cos(_al), D3 * np.sin(_al)]])
+RHO1 = 14.98
+
+
+@pytest.fixture(scope="module")
+def rpr():
+    return optkin.mechanisms.rpr3(BASE3, PLAT3)
+
+
+def rpr_det(x, y, phi):
+    """det A of the 3-RPR by hand: rows (P_i - A_i, cross(R b_i, P_i - A_i))."""
+    c, s = np.cos(phi), np.sin(phi)
+    rows = []
+    for A, b in zip(BASE3, PLAT3):
+        Rb = np.stack([c * b[0] - s * b[1], s * b[0] + c * b[1]], -1)
+        d = np.stack([x, y], -1) + Rb - A
+        rows.append(np.stack([d[..., 0], d[..., 1], cross(Rb, d)], -1))
+    M = np.stack(rows, -2)
+    return np.linalg.det(M)
+
+
+def rpr_chart(psi, phi):
+    """Platform pose with leg 1 at length RHO1 and angle psi; leg lengths 2 and 3."""
+    c, s = np.cos(phi), np.sin(phi)
+    b = PLAT3[0]
+    x = BASE3[0, 0] + RHO1 * np.cos(psi) - (c * b[0] - s * b[1])
+    y = BASE3[0, 1] + RHO1 * np.sin(psi) - (s * b[0] + c * b[1])
+    rh = []
+    for A, bb in zip(BASE3[1:], PLAT3[1:]):
+        px = x + c * bb[0] - s * bb[1] - A[0]
+        py = y + s * bb[0] + c * bb[1] - A[1]
+        rh.append(np.hypot(px, py))
+    return x, y, rh
+
+
+def cusp_ratio(psi, phi, e=1e-6):
+    """|J tau| / (|J| |tau|): tau the tangent of det A = 0 in the (psi, phi) chart, J the
+    Jacobian of (rho2, rho3); zero at a cusp of the joint-space curve. Finite differences."""
+    def D(a, b):
+        x, y, _ = rpr_chart(a, b)
+        return rpr_det(x, y, b)
+
+    def R(a, b):
+        return np.array(rpr_chart(a, b)[2])
+
+    g = np.array([(D(psi + e, phi) - D(psi - e, phi)) / (2 * e),
+                  (D(psi, phi + e) - D(psi, phi - e)) / (2 * e)])
+    tau = np.array([-g[1], g[0]])
+    J = np.stack([(R(psi + e, phi) - R(psi - e, phi)) / (2 * e),
+                  (R(psi, phi + e) - R(psi, phi - e)) / (2 * e)], 1)
+    return np.linalg.norm(J @ tau) / (np.linalg.norm(J) * np.linalg.norm(tau))
+
+
+def test_rpr_joint_section_and_cusps(rpr):
+    r = singular_curves(rpr, plane="joint", fixed={"L1.rho": RHO1}, bounds=[[0, 40], [0, 40]])
+    assert r.success, r.message
+    assert r.max_residual < 1e-9
+    V = np.vstack([c.v for c in r.curves])
+    assert np.allclose(V[:, 0], RHO1)
+    dets = rpr_det(V[:, 3], V[:, 4], V[:, 5])  # det of rows with lengths^3 units
+    assert np.max(np.abs(dets)) < 1e-9 * 40**3
+    assert len(r.cusps) >= 2
+    for v in r.cusps:
+        x, y, phi = v[3:]
+        b = PLAT3[0]
+        c, s = np.cos(phi), np.sin(phi)
+        P1 = np.array([x + c * b[0] - s * b[1], y + s * b[0] + c * b[1]])
+        psi = np.arctan2(*(P1 - BASE3[0])[::-1])
+        _, _, rh = rpr_chart(psi, phi)
+        assert np.allclose(rh, v[1:3], atol=1e-8)
+        assert cusp_ratio(psi, phi) < 1e-4
+    # ordinary points of the curve are not cusps (the test discriminates)
+    sample = V[:: max(1, len(V) // 50)]
+    ratios = []
+    for v in sample:
+        if np.min(np.linalg.norm(r.cusps[:, 1:3] - v[1:3], axis=1)) < 2.0:
+            continue
+        b = PLAT3[0]
+        c, s = np.cos(v[5]), np.sin(v[5])
+        P1 = np.array([v[3] + c * b[0] - s * b[1], v[4] + s * b[0] + c * b[1]])
+        ratios.append(cusp_ratio(np.arctan2(P1[1], P1[0]), v[5]))
+    assert np.median(ratios) > 1e-2
+
+
+def test_rpr_cusp_count_vs_brute_force(rpr):
+    """Cusps counted independently: the contour det A = 0 on a fine (psi, phi) grid
+    (contourpy, ordered polylines), mapped to (rho2, rho3); a cusp is where the mapped
+    polyline reverses direction (consecutive steps with a negative dot product)."""
+    import contourpy
+
+    r = singular_curves(rpr, plane="joint", fixed={"L1.rho": RHO1}, bounds=[[0, 40], [0, 40]])
+    n = 900
+    ps = np.linspace(-np.pi, np.pi, n)
+    PS, PH = np.meshgrid(ps, ps, indexing="ij")
+    x, y, _ = rpr_chart(PS, PH)
+    Dg = rpr_det(x, y, PH)
+    gen = contourpy.contour_generator(PS, PH, Dg)
+    rev = []
+    for line in gen.lines(0.0):
+        rr = np.array(rpr_chart(line[:, 0], line[:, 1])[2]).T
+        st = np.diff(rr, axis=0)
+        keep = np.linalg.norm(st, axis=1) > 1e-12
+        st, pts = st[keep], rr[1:][keep]
+        dots = np.einsum("ij,ij->i", st[:-1], st[1:])
+        for k in np.flatnonzero(dots < 0):
+            p = pts[k]
+            if 0.5 < p[0] < 39.5 and 0.5 < p[1] < 39.5:
+                rev.append(p)
+    clusters: list[np.ndarray] = []
+    for p in rev:
+        if all(np.linalg.norm(c - p) > 1.0 for c in clusters):
+            clusters.append(p)
+    found = [c for c in r.cusps[:, 1:3] if 0.5 < c[0] < 39.5 and 0.5 < c[1] < 39.5]
+    assert len(clusters) == len(found), (clusters, found)
+    for c in clusters:
+        assert np.min(np.linalg.norm(np.array(found) - c, axis=1)) < 0.5
+
+
+def test_rpr_workspace_section_conic(rpr):
+    """At constant orientation the 3-RPR's parallel singularity locus is a conic; every
+    traced point satisfies det A = 0 written by hand."""
+    r = singular_curves(rpr, plane="workspace", fixed={"phi": 0.5})
+    assert r.success and r.max_residual < 1e-9
+    V = np.vstack([c.v for c in r.curves])
+    assert np.allclose(V[:, 5], 0.5)
+    assert np.max(np.abs(rpr_det(V[:, 3], V[:, 4], V[:, 5]))) < 1e-6
+    # brute force: sign changes of det A on a grid lie on the traced curves
+    b = r.bounds
+    n = 300
+    xs, ys = np.linspace(*b[0], n), np.linspace(*b[1], n)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    Dg = rpr_det(X, Y, np.full_like(X, 0.5))
+    Q = np.stack([X, Y], -1)
+    cr = []
+    for a, bb, pa, pb in ((Dg[:-1], Dg[1:], Q[:-1], Q[1:]), (Dg[:, :-1], Dg[:, 1:], Q[:, :-1], Q[:, 1:])):
+        hit = a * bb < 0
+        s = (a[hit] / (a[hit] - bb[hit]))[:, None]
+        cr.append(pa[hit] + s * (pb[hit] - pa[hit]))
+    cr = np.vstack(cr)
+    h = max(xs[1] - xs[0], ys[1] - ys[0])
+    assert dist_to_curves(cr, r.curves).max() < 1.5 * h
+
+
+def test_pictures(tmp_path, five_bar):
+    r = singular_curves(five_bar, plane="joint", kind="all")
+    p = tmp_path / "joint.png"
+    r.plot(str(p))
+    assert p.stat().st_size > 5000
+    d = r.to_dict()
+    assert d["count"] == len(r.curves) and d["max_residual"] < 1e-9
+
+
+def test_errors(five_bar):
+    with pytest.raises(optkin.MechanismError, match="unknown coordinate"):
+        singular_curves(five_bar, plane=("nope", "x"))
+    with pytest.raises(optkin.MechanismError, match="kind"):
+        singular_curves(five_bar, kind="weird")
+    m = optkin.mechanisms.rpr3(BASE3, PLAT3)
+    with pytest.raises(optkin.MechanismError, match="fix"):
+        singular_curves(m, plane="workspace")
