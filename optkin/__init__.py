@@ -6,7 +6,15 @@ models, returning result objects that say what happened.
 """
 
 from . import mechanisms, plot, statics
-from .analysis import DofReport, Jacobians, SingularityReport, classify, dof, jacobians
+from .analysis import (
+    DofReport,
+    Jacobians,
+    SingularityReport,
+    classify,
+    dof,
+    jacobians,
+    plot_singularity_map,
+)
 from .errors import MechanismError, OptkinError, ProblemFileError, SolverError
 from .mechanism import Leg, Mechanism
 from .model import get_model
@@ -41,6 +49,7 @@ __all__ = [
     "get_model",
     "inverse",
     "jacobians",
+    "plot_singularity_map",
     "mechanisms",
     "plot",
     "statics",

@@ -3,11 +3,13 @@ singularity classification and maps (seed 000 7.8-7.11, Modern Robotics 7.2-7.3,
 and 004)."""
 
 from .continuation import Curve, SingularCurves, singular_curves
+from .maps import SingularityMap, plot_singularity_map, singularity_map
 from .mobility import DofReport, dof
 from .singularity import SingularityReport, classify
 from .velocity import Jacobians, jacobians
 
 __all__ = [
-    "Curve", "DofReport", "Jacobians", "SingularCurves", "SingularityReport", "classify", "dof",
-    "jacobians", "singular_curves",
+    "Curve", "DofReport", "Jacobians", "SingularCurves", "SingularityMap", "SingularityReport",
+    "classify", "dof", "jacobians", "plot_singularity_map", "singular_curves",
+    "singularity_map",
 ]

@@ -311,6 +311,10 @@ def dof(mech: Mechanism, samples: int = 5, seed: int = 0, rtol: float = 1e-8) ->
                f"mobility {mob} from the Jacobian rank")
     elif agree:
         msg = f"Grubler and the Jacobian rank agree: {mob} degree(s) of freedom"
+    elif mob == 0:
+        msg = (f"Grubler-Kutzbach counts {grub} and the constraint Jacobian has full rank {c} "
+               "at every sampled closed configuration: the closures are isolated, the "
+               "linkage is a rigid structure")
     else:
         msg = (f"Grubler-Kutzbach counts {grub}"
                + (f" ({grub - idle} without {idle} idle rotation(s))" if idle else "")
