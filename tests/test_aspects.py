@@ -1,0 +1,205 @@
+"""Working modes, generalized aspects and workspaces (Chablat & Wenger, seed 004).
+
+Independent evidence: a fine grid over the workspace per working mode with the five-bar's
+inverse kinematics, A and B written out by hand (seed 004, eqs. 7b-7c), its connected
+components counted with scipy.ndimage; the workspace area against the closed form of the
+intersection of two annuli (circle-lens areas); joint limits against a grid count.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+import optkin
+from optkin.analysis.aspects import aspects, leg_working_modes, workspace
+
+L0, L1, L2, L3, L4 = 9.0, 8.0, 5.0, 5.0, 8.0
+BB = np.array([L0, 0.0])
+
+
+def cross(u, w):
+    return u[..., 0] * w[..., 1] - u[..., 1] * w[..., 0]
+
+
+def u2(t):
+    return np.stack([np.cos(t), np.sin(t)], -1)
+
+
+def ik(P, s1, s2):
+    r1 = np.hypot(P[..., 0], P[..., 1])
+    dB = P - BB
+    r2 = np.hypot(dB[..., 0], dB[..., 1])
+    c1 = (r1**2 + L1**2 - L2**2) / (2 * r1 * L1)
+    c2 = (r2**2 + L4**2 - L3**2) / (2 * r2 * L4)
+    ok = (np.abs(c1) <= 1) & (np.abs(c2) <= 1)
+    t1 = np.arctan2(P[..., 1], P[..., 0]) + s1 * np.arccos(np.clip(c1, -1, 1))
+    t2 = np.arctan2(dB[..., 1], dB[..., 0]) + s2 * np.arccos(np.clip(c2, -1, 1))
+    return t1, t2, ok
+
+
+def hand_labels(P, s1, s2):
+    """det A and the signs of optkin's B_jj = d(|P - C| - L2)/d theta1 (= -L1 sin(theta3 -
+    theta1) of eq. 7c up to a positive factor), by hand."""
+    t1, t2, ok = ik(P, s1, s2)
+    C, D = L1 * u2(t1), BB + L4 * u2(t2)
+    det = cross(P - C, P - D)
+    m1 = -np.sign(cross(C, P - C))
+    m2 = -np.sign(cross(D - BB, P - D))
+    return det, m1, m2, ok, t1, t2
+
+
+def lens(r1, r2, d):
+    """Area of the intersection of two disks (closed form)."""
+    if d >= r1 + r2:
+        return 0.0
+    if d <= abs(r1 - r2):
+        return np.pi * min(r1, r2) ** 2
+    a1 = r1**2 * np.arccos((d * d + r1 * r1 - r2 * r2) / (2 * d * r1))
+    a2 = r2**2 * np.arccos((d * d + r2 * r2 - r1 * r1) / (2 * d * r2))
+    return a1 + a2 - 0.5 * np.sqrt((-d + r1 + r2) * (d + r1 - r2) * (d - r1 + r2) * (d + r1 + r2))
+
+
+@pytest.fixture(scope="module")
+def five_bar():
+    return optkin.mechanisms.five_bar(L0, L1, L2, L3, L4)
+
+
+@pytest.fixture(scope="module")
+def asp(five_bar):
+    return aspects(five_bar)
+
+
+@pytest.fixture(scope="module")
+def grid_labels():
+    n = 700
+    xs = np.linspace(-4.5, 13.5, n)
+    ys = np.linspace(-13.0, 13.0, n)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    P = np.stack([X, Y], -1)
+    cell = (xs[1] - xs[0]) * (ys[1] - ys[0])
+    out = {}
+    for s1 in (1, -1):
+        for s2 in (1, -1):
+            det, m1, m2, ok, _, _ = hand_labels(P, s1, s2)
+            mode = (int(m1[ok][0]), int(m2[ok][0]))
+            assert np.all(m1[ok] == mode[0]) and np.all(m2[ok] == mode[1])
+            comps = []
+            for sgn in (1, -1):
+                lab, nl = ndimage.label(ok & (np.sign(det) == sgn))
+                sizes = ndimage.sum_labels(np.ones_like(lab), lab, index=np.arange(1, nl + 1))
+                for k, sz in enumerate(sizes, start=1):
+                    if sz > 30:
+                        comps.append((sgn, sz * cell, lab == k))
+            out[mode] = comps
+    return xs, ys, out
+
+
+def test_four_working_modes(five_bar, asp):
+    modes = leg_working_modes(five_bar)
+    assert len(modes) == 4 and len(set(modes)) == 4  # seed 004, section 3.4
+    assert asp.working_modes == modes
+    assert set(asp.counts) == set(modes)
+
+
+def test_aspects_against_grid_components(asp, grid_labels):
+    """Per working mode: as many aspects as connected components of the grid labelled by
+    the sign of det A, with matching signs and areas, and the representative point inside."""
+    xs, ys, comps = grid_labels
+    h = max(xs[1] - xs[0], ys[1] - ys[0])
+    assert asp.success, asp.message
+    for mode, cs in comps.items():
+        mine = asp.of_mode(mode)
+        assert len(mine) == len(cs), (mode, [a.area for a in mine], [c[1] for c in cs])
+        for a in mine:
+            i = int(round((a.x[0] - xs[0]) / (xs[1] - xs[0])))
+            j = int(round((a.x[1] - ys[0]) / (ys[1] - ys[0])))
+            hits = [c for c in cs if c[2][i, j]]
+            assert len(hits) == 1, mode
+            sgn, area, _ = hits[0]
+            assert sgn == a.det_sign
+            # grid area error ~ perimeter * step
+            per = sum(np.sum(np.linalg.norm(np.diff(np.vstack([R, R[:1]]), axis=0), axis=1))
+                      for R in [a.face.outer] + a.face.holes)
+            assert abs(area - a.area) < 0.6 * per * h + 1e-3 * a.area, (mode, area, a.area)
+    # the representative configurations are what they claim, by hand
+    for a in asp.aspects:
+        t1, t2 = a.qa
+        P = a.x
+        C, D = L1 * u2(t1), BB + L4 * u2(t2)
+        assert abs(np.linalg.norm(P - C) - L2) < 1e-9 and abs(np.linalg.norm(P - D) - L3) < 1e-9
+        assert -np.sign(cross(C, P - C)) == a.working_mode[0]
+        assert -np.sign(cross(D - BB, P - D)) == a.working_mode[1]
+        assert np.sign(cross(P - C, P - D)) == a.det_sign
+
+
+def test_aspect_counts_five_bar(asp):
+    """The counts this test suite establishes for the paper's robot (L0 = 9, L1 = 8,
+    L2 = L3 = 5, L4 = 8): two aspects in each working mode where both legs have the same
+    posture sign, three where they differ (the grid test above confirms them)."""
+    c = asp.counts
+    assert sorted(c.values()) == [2, 2, 3, 3]
+    assert c[(1, 1)] == c[(-1, -1)] == 2 and c[(1, -1)] == c[(-1, 1)] == 3
+    # the union of the aspects of a working mode fills its workspace (det A = 0 is thin)
+    for m in asp.working_modes:
+        assert abs(sum(a.area for a in asp.of_mode(m)) - asp.workspace_area[m]) < 1e-6
+    # serial aspects: joint-space masks exist and have positive area
+    assert all(a.qa_area > 0 for a in asp.aspects)
+
+
+def test_workspace_area_closed_form(five_bar):
+    """W = annulus(A; 3, 13) intersected with annulus(B; 3, 13): inclusion-exclusion of
+    disk lenses (closed form)."""
+    ro, ri = L1 + L2, abs(L1 - L2)
+    exact = lens(ro, ro, L0) - lens(ri, ro, L0) - lens(ro, ri, L0) + lens(ri, ri, L0)
+    ws = workspace(five_bar)
+    assert ws.success, ws.message
+    assert abs(ws.area - exact) < 5e-4 * exact, (ws.area, exact)
+    for m in ws.working_modes:  # every working mode reaches the whole workspace here
+        assert abs(ws.areas[m] - exact) < 5e-4 * exact
+        assert len(ws.regions[m]) == 1 and len(ws.regions[m][0].holes) == 2
+
+
+def test_workspace_with_joint_limits(five_bar):
+    """Joint limits theta1 in [0, 2], theta2 in [1, 3]: areas per working mode against a
+    grid count with the hand-written inverse kinematics."""
+    lim = {"L1.theta1": (0.0, 2.0), "L2.theta1": (1.0, 3.0)}
+    ws = workspace(five_bar, limits=lim)
+    assert ws.success, ws.message
+    n = 900
+    xs = np.linspace(-4.5, 13.5, n)
+    ys = np.linspace(-13.0, 13.0, n)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    P = np.stack([X, Y], -1)
+    cell = (xs[1] - xs[0]) * (ys[1] - ys[0])
+    union = np.zeros(X.shape, dtype=bool)
+    for s1 in (1, -1):
+        for s2 in (1, -1):
+            _, m1, m2, ok, t1, t2 = hand_labels(P, s1, s2)
+            t1 = (t1 + np.pi) % (2 * np.pi) - np.pi
+            t2 = (t2 + np.pi) % (2 * np.pi) - np.pi
+            inside = ok & (t1 >= 0) & (t1 <= 2) & (t2 >= 1) & (t2 <= 3)
+            union |= inside
+            if not inside.any():
+                continue
+            mode = (int(m1[inside][0]), int(m2[inside][0]))
+            area = inside.sum() * cell
+            assert abs(ws.areas[mode] - area) < 0.02 * area + 0.5, (mode, ws.areas[mode], area)
+    assert abs(ws.area - union.sum() * cell) < 0.02 * ws.area + 0.5
+
+
+def test_pictures(tmp_path, asp, five_bar):
+    p = tmp_path / "aspects.png"
+    asp.plot(str(p))
+    assert p.stat().st_size > 10000
+    d = asp.to_dict()
+    assert d["n_working_modes"] == 4 and d["count"] == len(asp.aspects)
+
+
+def test_errors(five_bar):
+    m = optkin.mechanisms.rpr3([[0, 0], [1, 0], [0, 1]], [[0, 0], [0.2, 0], [0, 0.2]])
+    with pytest.raises(optkin.MechanismError, match="phi"):
+        aspects(m)
+    with pytest.raises(optkin.MechanismError, match="actuated joint"):
+        workspace(five_bar, limits={"x": (0, 1)})
