@@ -485,3 +485,36 @@ def test_redundant_mechanism_forward_inverse_and_validation():
 
     assert pickle.loads(pickle.dumps(m)).key == m.key
     assert optkin.mechanisms.rpr3(BASE3, PLAT3).redundant is False
+
+
+# ----------------------------------------------------------------------------- problem files
+
+
+def _statics_doc(**task):
+    return {
+        "schema_version": 1,
+        "mechanism": {"type": "library", "name": "rpr3",
+                      "args": {"base": BASE3.tolist(), "platform": PLAT3.tolist()}},
+        "task": [{"kind": "statics", **task}],
+    }
+
+
+def test_problem_file_statics_task_validation():
+    from optkin.errors import ProblemFileError
+    from optkin.problems.schema import validate_document
+
+    ok = validate_document(_statics_doc(pose=[1.6, 1.2, 0.3], limits=[1.0, 2.0, 1.0],
+                                        directions=["fx", "-mz", [1.0, 1.0, 0.0]]), "s.toml")
+    assert ok.task[0].analysis == "capability"
+    with pytest.raises(ProblemFileError, match=r"s.toml: task\[0\].limits: required"):
+        validate_document(_statics_doc(pose=[1.6, 1.2, 0.3]), "s.toml")
+    with pytest.raises(ProblemFileError, match=r"s.toml: task\[0\].q: give exactly one of q, qa"):
+        validate_document(_statics_doc(limits=1.0), "s.toml")
+    with pytest.raises(ProblemFileError, match=r"task\[0\].wrench: required for analysis = 'distribute'"):
+        validate_document(_statics_doc(analysis="distribute", qa=[1.0, 2.0, 2.0]), "s.toml")
+    with pytest.raises(ProblemFileError, match=r"task\[0\].wrench_upper: a wrench box needs"):
+        validate_document(_statics_doc(analysis="feasible", pose=[1.6, 1.2, 0.3], limits=1.0,
+                                       wrench_lower=[0.0, 0.0, 0.0]), "s.toml")
+    with pytest.raises(ProblemFileError, match=r"task\[0\].directions\[1\]: expected a component name"):
+        validate_document(_statics_doc(pose=[1.6, 1.2, 0.3], limits=1.0,
+                                       directions=["fx", "torque"]), "s.toml")

@@ -695,14 +695,84 @@ class AspectsTask(TaskBase):
         _list_of(_point(2), "ranges [low, high]"))] | None = None
 
 
+def _statics_limits(v: Any) -> float | list:
+    """A bound for every actuator, one bound each, or one pair [lo, hi] each."""
+    if _is_number(v):
+        return _nonneg(v)
+    if isinstance(v, list) and v and all(isinstance(x, list) for x in v):
+        return _list_of(_point(2), "pairs [lo, hi]", min_n=1)(v)
+    if isinstance(v, list):
+        return _list_of(_nonneg, "numbers >= 0", min_n=1)(v)
+    raise _err("limits", "expected a number, a list of bounds or a list of pairs [lo, hi]", v)
+
+
+def _statics_directions(v: Any) -> list:
+    """Wrench directions: lists of numbers, or component names such as "fx", "-mz"."""
+    def one(d: Any) -> Any:
+        if isinstance(d, str):
+            if not re.fullmatch(r"[+-]?[fm][xyz]", d):
+                raise _err("direction", "expected a component name like 'fx' or '-mz'", d)
+            return d
+        return _list_of(_number, "numbers", min_n=1)(d)
+
+    return _list_of(one, "directions", min_n=1)(v)
+
+
+def _statics_norm(v: Any) -> str:
+    if v in (2, "2"):
+        return "2"
+    if v == "inf":
+        return "inf"
+    raise _err("norm", "expected 2 or \"inf\"", v)
+
+
 class StaticsTask(TaskBase):
-    """Statics: wrench capability of the platform at a configuration."""
+    """Statics (``optkin.statics``) at a configuration given by ``q``, ``qa`` (solved by
+    forward first) or ``pose`` (solved by inverse, posture ``posture``):
+
+    * ``analysis = "capability"``: ``limits``, optional ``directions`` (default +-each
+      component); a capability-polygon picture when ``draw`` (planar platforms);
+    * ``analysis = "feasible"``: ``limits`` and a wrench set: ``wrench`` (one wrench),
+      ``wrench_lower`` + ``wrench_upper`` (a box) or ``wrench_vertices``;
+    * ``analysis = "distribute"``: ``wrench``, optional ``limits``, ``norm`` (2 or "inf").
+    """
 
     kind: Literal["statics"]
+    analysis: Literal["capability", "feasible", "distribute"] = "capability"
     qa: JointVector | None = None
     q: JointVector | None = None
-    wrench: Numbers() | None = None
-    limits: Numbers(positive=True) | None = None
+    pose: Pose | None = None
+    posture: NonNegInt = 0
+    limits: Annotated[Any, PlainValidator(_statics_limits)] | None = None
+    directions: Annotated[list, PlainValidator(_statics_directions)] | None = None
+    wrench: Numbers(min_n=1) | None = None
+    wrench_lower: Numbers(min_n=1) | None = None
+    wrench_upper: Numbers(min_n=1) | None = None
+    wrench_vertices: Annotated[list[list[float]], PlainValidator(
+        _list_of(_list_of(_number, "numbers", min_n=1), "wrenches", min_n=1))] | None = None
+    norm: Annotated[str, PlainValidator(_statics_norm)] = "2"
+    draw: Bool = True
+
+    @model_validator(mode="after")
+    def _needs(self) -> StaticsTask:
+        def fail(key: str, msg: str) -> PydanticCustomError:
+            return PydanticCustomError("statics", "{__loc__}" + msg, {"__loc__": f"[{key!r}]"})
+
+        if sum(x is not None for x in (self.q, self.qa, self.pose)) != 1:
+            raise fail("q", "give exactly one of q, qa or pose (the configuration)")
+        if self.analysis in ("capability", "feasible") and self.limits is None:
+            raise fail("limits", f"required for analysis = {self.analysis!r}")
+        if self.analysis == "distribute" and self.wrench is None:
+            raise fail("wrench", "required for analysis = 'distribute'")
+        if self.analysis == "feasible":
+            given = [self.wrench is not None, self.wrench_vertices is not None,
+                     self.wrench_lower is not None or self.wrench_upper is not None]
+            if sum(given) != 1:
+                raise fail("wrench", "give one wrench set: wrench, wrench_vertices, or "
+                           "wrench_lower with wrench_upper")
+            if given[2] and (self.wrench_lower is None or self.wrench_upper is None):
+                raise fail("wrench_upper", "a wrench box needs wrench_lower and wrench_upper")
+        return self
 
 
 #: Task kind -> its parameter model. Later issues add their kinds here.

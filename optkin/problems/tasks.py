@@ -324,10 +324,40 @@ def aspects_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
 
 @register("statics")
 def statics_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
-    """``optkin.statics.capability(mech, q, wrench=..., limits=..., **options)``."""
-    fn = library_function("statics.capability", "statics")
-    q = _q_of(mech, task, ctx)
-    return _generic(fn(mech, q, **_kw(task, "wrench", "limits"), **dict(task.options)))
+    """``optkin.statics.capability / feasible / distribute`` at ``q``, ``qa`` or ``pose``."""
+    fn = library_function(f"statics.{task.analysis}", "statics")
+    if getattr(task, "pose", None) is not None:
+        sols = library_function("inverse", "inverse")(mech, _pose(task.pose))
+        if len(sols) <= task.posture:
+            raise ValueError(f"pose {list(task.pose)}: no posture {task.posture} "
+                             f"({len(sols)} postures)")
+        q = sols[task.posture]
+        ctx.notes.append(f"configuration solved from pose by inverse (posture {task.posture})")
+    else:
+        q = _q_of(mech, task, ctx)
+    opts = dict(task.options)
+    if task.analysis == "capability":
+        res = fn(mech, q, task.limits, task.directions, **opts)
+    elif task.analysis == "feasible":
+        if task.wrench_lower is not None:
+            wset: Any = {"lower": task.wrench_lower, "upper": task.wrench_upper}
+        else:
+            wset = task.wrench_vertices if task.wrench_vertices is not None else task.wrench
+        res = fn(mech, q, wset, task.limits, **opts)
+    else:
+        res = fn(mech, q, task.wrench, task.limits, norm=task.norm, **opts)
+    out = _generic(res)
+    out["configuration"] = jsonable(getattr(q, "q", q))
+    path = ctx.picture_path()
+    if (task.analysis == "capability" and task.draw and path is not None
+            and getattr(res, "success", False) and {"fx", "fy"} <= set(res.wrench_names)):
+        try:  # the force polygon (fx, fy at zero moment) over 72 directions
+            poly = library_function("statics.capability_polygon", "statics")
+            poly(mech, q, task.limits, n=72, path=str(path), **opts)
+            out["pictures"] = [str(path)]
+        except Exception as e:  # noqa: BLE001 - a picture never fails a task
+            ctx.notes.append(f"no picture: {type(e).__name__}: {e}")
+    return out
 
 
 def run_task(mech: Any, task: TaskBase, ctx: TaskContext) -> dict[str, Any]:

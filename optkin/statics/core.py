@@ -329,7 +329,10 @@ def capability_polygon(
     if path is not None:
         from .plots import plot_capability
 
-        plot_capability(res, path, plane=tuple(plane))
+        exact = None
+        if sm.G is not None and sm.na <= 12 and res.success:
+            exact = _polytope(sm, lo, hi, opts).section(tuple(plane))  # type: ignore[arg-type]
+        plot_capability(res, path, plane=tuple(plane), exact=exact)
     return res
 
 
@@ -345,10 +348,15 @@ def polytope(mech: Mechanism, q: Any, limits: Any, **options: Any) -> PolytopeRe
     Undefined at a serial singularity (``success=False``).
     """
     opts = merge_options(STATICS_DEFAULTS, options, "polytope")
-    from scipy.spatial import ConvexHull, QhullError
-
     sm = static_model(mech, q, float(opts["sing_tol"]))
     lo, hi = limits_of(limits, sm)  # type: ignore[misc]
+    return _polytope(sm, lo, hi, opts)
+
+
+def _polytope(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, opts: dict[str, Any]
+              ) -> PolytopeResult:
+    from scipy.spatial import ConvexHull, QhullError
+
     m = sm.m
     empty = dict(vertices=np.zeros((0, m)), equations=np.zeros((0, m + 1)), dimension=0,
                  volume=0.0, wrench_names=sm.wrench_names)

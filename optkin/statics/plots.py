@@ -26,11 +26,13 @@ def plot_capability(
     path: str | os.PathLike[str],
     plane: Sequence[str] = ("fx", "fy"),
     title: str | None = None,
+    exact: np.ndarray | None = None,
 ) -> str:
     """Draw the capability polygon of ``res`` in the plane of two wrench components.
 
     Directions whose other components are non-zero are skipped; unresisted directions are
-    drawn at the origin in red, unbounded ones as arrows. Returns the path written.
+    drawn at the origin in red, unbounded ones as arrows. ``exact`` (k, 2): the exact
+    section of the capability polytope, drawn dashed. Returns the path written.
     """
     plt = _plt()
     names = list(res.wrench_names)
@@ -46,7 +48,11 @@ def plot_capability(
         pts = np.array([[res.points[k, i], res.points[k, j]] for k in fin])
         closed = np.vstack([pts, pts[:1]])
         ax.fill(closed[:, 0], closed[:, 1], alpha=0.25, color="C0")
-        ax.plot(closed[:, 0], closed[:, 1], "-", color="C0", lw=1.5, label="capability")
+        ax.plot(closed[:, 0], closed[:, 1], "-", color="C0", lw=1.5,
+                label=f"capability LP ({len(fin)} directions)")
+    if exact is not None and len(exact) >= 3:
+        ex = np.vstack([exact, exact[:1]])
+        ax.plot(ex[:, 0], ex[:, 1], "--", color="k", lw=1.0, label="polytope section")
     unres = [k for k in order if res.direction_status[k] == "unresisted"]
     if unres:
         ax.plot(0, 0, "o", color="C3", label=f"{len(unres)} unresisted directions")

@@ -112,6 +112,27 @@ class PolytopeResult(_Result):
             return 0.0
         return float(max(0.0, lim.min())) if lim.size else float("inf")
 
+    def section(self, plane: tuple[str, str] = ("fx", "fy")) -> np.ndarray:
+        """Vertices (k, 2), counter-clockwise, of the section of the polytope by the plane of
+        two components (the others zero); empty when the section is degenerate."""
+        from scipy.spatial import HalfspaceIntersection, QhullError
+
+        names = list(self.wrench_names)
+        idx = [names.index(c) for c in plane]
+        if self.equations.shape[0] == 0:
+            return np.zeros((0, 2))
+        H = np.column_stack([self.equations[:, idx], self.equations[:, -1]])
+        if np.any(H[:, -1] >= -1e-12):  # the origin is not strictly inside
+            return np.zeros((0, 2))
+        try:
+            V = HalfspaceIntersection(H, np.zeros(2)).intersections
+        except QhullError:
+            return np.zeros((0, 2))
+        c = V.mean(axis=0)
+        V = V[np.argsort(np.arctan2(V[:, 1] - c[1], V[:, 0] - c[0]))]
+        keep = np.r_[True, np.linalg.norm(np.diff(V, axis=0), axis=1) > 1e-12]
+        return V[keep]
+
 
 @dataclass(repr=False)
 class FeasibilityResult(_Result):
