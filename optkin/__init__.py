@@ -15,6 +15,8 @@ from .analysis import (
     jacobians,
     plot_singularity_map,
 )
+from .analysis.aspects import Aspects, Workspace, aspects, workspace
+from .analysis.continuation import SingularCurves, singular_curves
 from .errors import MechanismError, OptkinError, ProblemFileError, SolverError
 from .mechanism import Leg, Mechanism
 from .model import get_model
@@ -26,6 +28,12 @@ from .solvers.enumerate import WorkingModes, assembly_modes, track, working_mode
 __version__ = "0.1.0"
 
 __all__ = [
+    "Aspects",
+    "SingularCurves",
+    "Workspace",
+    "aspects",
+    "singular_curves",
+    "workspace",
     "DofReport",
     "Jacobians",
     "KinResult",

@@ -2,6 +2,7 @@
 singularity classification and maps (seed 000 7.8-7.11, Modern Robotics 7.2-7.3, seeds 003
 and 004)."""
 
+from .aspects import Aspect, Aspects, Workspace, aspects, workspace
 from .continuation import Curve, SingularCurves, singular_curves
 from .maps import SingularityMap, plot_singularity_map, singularity_map
 from .mobility import DofReport, dof
@@ -9,6 +10,7 @@ from .singularity import SingularityReport, classify
 from .velocity import Jacobians, jacobians
 
 __all__ = [
+    "Aspect", "Aspects", "Workspace", "aspects", "workspace",
     "Curve", "DofReport", "Jacobians", "SingularCurves", "SingularityMap", "SingularityReport",
     "classify", "dof", "jacobians", "plot_singularity_map", "singular_curves",
     "singularity_map",
