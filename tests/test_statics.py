@@ -518,3 +518,50 @@ def test_problem_file_statics_task_validation():
     with pytest.raises(ProblemFileError, match=r"task\[0\].directions\[1\]: expected a component name"):
         validate_document(_statics_doc(pose=[1.6, 1.2, 0.3], limits=1.0,
                                        directions=["fx", "torque"]), "s.toml")
+
+
+# ----------------------------------------------------------------------------- more checks
+
+
+def test_delta_virtual_work_by_forward_finite_differences():
+    """Delta (translational, RUS legs): tau . dqa = F . dp with dp from the direct model."""
+    m = optkin.mechanisms.delta()
+    s = sol_at(m, [0.03, -0.02, -0.75])
+    sm = statics.static_model(m, s)
+    assert sm.wrench_names == ("fx", "fy", "fz") and sm.singularity == "none"
+    tau = np.array([0.7, -0.2, 0.4])
+    F = sm.wrench(tau)
+    h = 1e-6
+    for _ in range(3):
+        dqa = RNG.normal(size=3)
+        p1 = optkin.forward(m, s.qa + h * dqa, guess=s).pose[:3, 3]
+        p0 = optkin.forward(m, s.qa - h * dqa, guess=s).pose[:3, 3]
+        dp = (p1 - p0) / (2 * h)
+        assert abs(tau @ dqa - F @ dp) < 1e-6 * (1 + abs(tau @ dqa))
+
+
+def test_static_model_consistent_with_optkin_jacobians():
+    """Cross-check with the velocity model of optkin.analysis (another implementation)."""
+    ang = np.deg2rad([0, 60, 120, 180, 240, 300])
+    base = np.column_stack([np.cos(ang + 0.2), np.sin(ang + 0.2), np.zeros(6)])
+    plat = 0.4 * np.column_stack([np.cos(ang - 0.5), np.sin(ang - 0.5), np.zeros(6)])
+    m = optkin.mechanisms.stewart_gough(base, plat)
+    s = sol_at(m, [0.02, 0.01, 0.8, 0.05, 0.1, -0.1])
+    jac = optkin.jacobians(m, s)
+    sm = statics.static_model(m, s)
+    np.testing.assert_allclose(sm.A, jac.A, atol=1e-12)
+    np.testing.assert_allclose(sm.B, jac.B, atol=1e-12)
+    m6 = optkin.mechanisms.sr400()
+    r6 = optkin.forward(m6, [0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    np.testing.assert_allclose(statics.static_model(m6, r6).J, optkin.jacobians(m6, r6).J_task,
+                               atol=1e-10)
+
+
+@pytest.mark.parametrize("name", ["optkin.statics.core", "optkin.statics.model"])
+def test_statics_docstring_examples(name):
+    import doctest
+    import importlib
+
+    failures, tried = doctest.testmod(importlib.import_module(name),
+                                      optionflags=doctest.ELLIPSIS)
+    assert tried > 0 and failures == 0
