@@ -290,34 +290,47 @@ class Model:
             f = self._result_fn
         return f
 
-    def compile(self, build: bool = True) -> bool:
+    def compile(self, build: bool = True, tracker: tuple[int, int] | None = None) -> bool:
         """Use compiled C versions of the step, residual, Jacobians, pose and result.
 
         Loads them from the disk cache, or (``build=True``) generates and compiles them
         with the system C compiler (see :mod:`optkin.model.compiled`). ``step`` becomes the
         compiled Newton step; ``phi``, ``jac`` and ``pose_fn`` stay the SX Functions (they
-        are used symbolically), their compiled twins are in ``compiled_fns``. Returns
-        whether compiled code is in use; without a compiler nothing changes.
+        are used symbolically), their compiled twins are in ``compiled_fns``. ``tracker``
+        = (chunk, iters) also prepares :meth:`tracker`, the two libraries being compiled
+        in parallel. Returns whether compiled code is in use; without a compiler nothing
+        changes.
         """
-        if self.compiled_step is not None:
+        want_tr = tracker is not None and (int(tracker[0]), int(tracker[1])) not in self._tracker
+        if self.compiled_step is not None and not want_tr:
             return True
         if self._compile_failed and build:
             return False
         with self._compile_lock:
-            if self.compiled_step is not None:
-                return True
-            if self._result_fn is None:
-                self._result_fn = fused.result_function(self)
-            funcs = [self.phi, self.jac, self.step_sx, self.pose_fn, self._result_fn]
-            lib = cc.library("core:" + self.mech.key, funcs, build=build)
-            if lib is None:
-                self._compile_failed = build
-                return False
-            self.compiled_fns = lib
-            self.step = lib["newton_step"]
-            self._batch = {}
-            self._gen += 1
-            self.compiled_step = lib["newton_step"]
+            reqs: list[tuple[str, list[ca.Function]]] = []
+            if self.compiled_step is None:
+                if self._result_fn is None:
+                    self._result_fn = fused.result_function(self)
+                reqs.append(("core:" + self.mech.key,
+                             [self.phi, self.jac, self.step_sx, self.pose_fn, self._result_fn]))
+            if want_tr:
+                f_tr = self._tracker_sx(*tracker)
+                reqs.append((self._tracker_tag(*tracker), [f_tr]))
+            libs = cc.libraries(reqs, build=build)
+            if want_tr:
+                lib_tr = libs[-1]
+                self._tracker[(int(tracker[0]), int(tracker[1]))] = (
+                    lib_tr[f_tr.name()] if lib_tr is not None else f_tr)
+            if self.compiled_step is None:
+                lib = libs[0]
+                if lib is None:
+                    self._compile_failed = build
+                    return False
+                self.compiled_fns = lib
+                self.step = lib["newton_step"]
+                self._batch = {}
+                self._gen += 1
+                self.compiled_step = lib["newton_step"]
         return True
 
     def note_use(self) -> None:
@@ -349,19 +362,25 @@ class Model:
         self.compile()
         return self.batch_step(n)
 
+    def _tracker_sx(self, chunk: int, iters: int) -> ca.Function:
+        one = fused.tracker_function(self, int(iters))
+        return one.mapaccum(f"track_{int(chunk)}_{int(iters)}", int(chunk), 2)
+
+    def _tracker_tag(self, chunk: int, iters: int) -> str:
+        return f"track:{self.mech.key}:{int(chunk)}:{int(iters)}"
+
     def tracker(self, chunk: int, iters: int = 2) -> tuple[ca.Function, bool]:
         """The path tracker of ``forward_batch`` over ``chunk`` points (``mapaccum`` of
         :func:`optkin.model.fused.tracker_function`), and whether it is compiled."""
         key = (int(chunk), int(iters))
         f = self._tracker.get(key)
         if f is None:
-            one = fused.tracker_function(self, iters)
-            f = one.mapaccum(f"track_{chunk}_{iters}", int(chunk), 2)
-            lib = cc.library(f"track:{self.mech.key}:{chunk}:{iters}", [f])
+            f = self._tracker_sx(chunk, iters)
+            lib = cc.library(self._tracker_tag(chunk, iters), [f])
             if lib is not None:
                 f = lib[f.name()]
             self._tracker[key] = f
-        return f, isinstance(f, ca.Function) and f.is_a("External")
+        return f, f.is_a("External")
 
     # -------------------------------------------------------------- solvers
     def batch_step(self, n: int) -> ca.Function:

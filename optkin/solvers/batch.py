@@ -176,9 +176,10 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
     A = _as_rows(model, QA)
     tol = float(opts["tol"])
     chunk = max(1, int(opts["chunk"]))
-    model.compile()
     if opts["path"]:
+        model.compile(tracker=(chunk, int(opts["iters"])))  # both libraries in parallel
         return _track(model, A, guess, tol, chunk, int(opts["iters"]), bool(opts["fallback"]))
+    model.compile()
     return _independent(model, A, guess, tol, chunk, int(opts["max_iter"]),
                         max(1, int(opts["threads"])), bool(opts["fallback"]))
 

@@ -21,7 +21,7 @@ from ..mechanism import Mechanism
 from ..mechanism.geometry import wrap_angle
 from ..mechanism.legs import leg_inverse
 from ..mechanism.tasks import as_pose
-from ..model import Model, get_model
+from ..model import Model, compiled, get_model
 from ..model import khalil as kh
 from ..model.core import damped_step
 from ..results import KinResult, SolutionSet, SolverStats
@@ -93,8 +93,9 @@ def _inverse_legs(model: Model, T: np.ndarray, tol: float) -> SolutionSet:
         qa = q[act]
         if np.any(qa[[n.endswith(".rho") for n in mech.active_names]] <= 0):
             continue
-        _, _, Wa = model.jac(qa, x)
-        wm = tuple(int(np.sign(v)) for v in np.diag(np.array(Wa)))
+        ev = model.fast("W")  # buffered (compiled when available) evaluation
+        ev(qa, x)
+        wm = tuple(int(np.sign(v)) for v in np.diag(ev.dense(2)))
         stats = SolverStats("closed-form", 0.0, timer() - t0, 0, "legs")
         r = make_result(model, qa, x, tol, 0, stats, posture=tuple(combo), working_mode=wm)
         r.q = q  # the closed-form joint values of this posture
@@ -162,6 +163,13 @@ def _inverse_system(model: Model) -> dict[str, Any]:
     else:
         G = ca.vertcat(phi, task)
         out["joint"] = _newton_function("inv_all", G, q, [Td], scale)[0]
+    # compiled C versions of the batched Newton steps when a compiler is present (the
+    # interpreted steps took ~90 % of the time of a Khalil inverse; optkin.model.compiled)
+    keys = [k for k in ("stage1", "stage2", "joint") if k in out]
+    lib = compiled.library("inv:" + mech.key, [out[k] for k in keys])
+    if lib is not None:
+        for k in keys:
+            out[k] = lib[out[k].name()]
     model._inv = out
     return out
 
@@ -187,16 +195,14 @@ def distinct(
 ) -> list[int]:
     """Indices of the distinct columns of X (angles compared modulo 2 pi)."""
     keep: list[int] = []
+    sc = np.reshape(np.asarray(scale, dtype=float), (-1, 1))
     for j in range(X.shape[1]):
-        new = True
-        for k in keep:
-            d = X[:, j] - X[:, k]
+        if keep:  # compare with every kept column at once
+            d = X[:, keep] - X[:, j:j + 1]
             d[angle] = wrap_angle(d[angle])
-            if np.max(np.abs(d) / scale) < tol:
-                new = False
-                break
-        if new:
-            keep.append(j)
+            if np.min(np.max(np.abs(d) / sc, axis=0)) < tol:
+                continue
+        keep.append(j)
     return keep
 
 
