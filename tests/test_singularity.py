@@ -327,3 +327,55 @@ def test_classify_options_and_report():
     d = rep.to_dict()
     assert d["types"] == [] and set(d["margins"]) >= {"serial", "parallel", "end_effector"}
     assert not rep.singular and repr(rep) == "SingularityReport(regular)"
+
+
+# ------------------------------------------------------------------ spatial platforms
+def test_stewart_gough_fichter_singularity_from_pluecker_lines():
+    """Fichter (1986): a 6-6 platform with semi-regular hexagons, centred, is singular when
+    rotated by +-90 deg about the vertical from its central orientation. Independently of the
+    model, the six leg lines (Pluecker coordinates (n_i, q_i x n_i), computed here) are then
+    linearly dependent; the parallel verdict must follow that determinant."""
+    a, b = np.deg2rad(10), np.deg2rad(15)
+    angb = np.array([k * 2 * np.pi / 3 + s * a for k in range(3) for s in (-1, 1)])
+    angp = np.roll(np.array([k * 2 * np.pi / 3 + np.pi / 3 + s * b
+                             for k in range(3) for s in (-1, 1)]), 1)
+    base = np.c_[np.cos(angb), np.sin(angb), np.zeros(6)]
+    plat = 0.5 * np.c_[np.cos(angp), np.sin(angp), np.zeros(6)]
+    m = M.stewart_gough(base, plat)
+    for yaw in np.deg2rad([0.0, 45.0, 89.0, 90.0, -90.0, 120.0]):
+        c, s = np.cos(yaw), np.sin(yaw)
+        R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+        p = np.array([0.0, 0.0, 1.0])
+        P = p + plat @ R.T
+        n = (P - base) / np.linalg.norm(P - base, axis=1)[:, None]
+        pl = np.c_[n, np.cross(base, n)]
+        expected = abs(np.linalg.det(pl)) < 1e-9
+        rep = optkin.classify(m, optkin.inverse(m, [0, 0, 1.0, 0, 0, yaw])[0])
+        assert ("parallel" in rep.types) == expected, np.rad2deg(yaw)
+        assert expected == bool(np.isclose(abs(yaw), np.pi / 2))
+        assert "serial" not in rep.types
+
+
+def test_delta_stretched_arm_is_a_serial_singularity():
+    """Delta (base radius 0.2, platform 0.05, arm 0.3, forearm 0.8): put leg 1's forearm in
+    line with its arm (theta = 100 deg) - the elbow is straight, |P - A| = arm + forearm, and
+    B_11 = 0. The other two legs are not straight (checked here)."""
+    Rb, rp, la, lb = 0.2, 0.05, 0.3, 0.8
+    m = M.delta(Rb, rp, la, lb)
+    th = np.deg2rad(100.0)
+    u0, z = np.array([1.0, 0, 0]), np.array([0, 0, 1.0])
+    A0 = Rb * u0
+    P0 = A0 + (la + lb) * (np.cos(th) * u0 - np.sin(th) * z)
+    p = P0 - rp * u0
+    straight = []
+    for k in range(3):
+        ak = 2 * np.pi * k / 3
+        u = np.array([np.cos(ak), np.sin(ak), 0.0])
+        straight.append(abs(np.linalg.norm(p + rp * u - Rb * u) - (la + lb)) < 1e-12)
+    assert straight == [True, False, False]
+    sols = optkin.inverse(m, p)
+    assert len(sols) == 4  # legs 2 and 3 have two postures each, leg 1 one (double root)
+    for s in sols:
+        rep = optkin.classify(m, s)
+        assert "serial" in rep.types and rep.legs_at_psik == (1,)
+        assert "PSIK" in rep and "MSIK" in rep
