@@ -267,7 +267,9 @@ class SingularCurves:
             "max_residual": self.max_residual,
             "n_branch_points": int(len(self.branch_points)),
             "branch_points": self.branch_points.tolist(),
+            "branch_points_plane": self.branch_points[:, list(self.info["plane_index"])].tolist(),
             "n_cusps": int(len(self.cusps)), "cusps": self.cusps.tolist(),
+            "cusps_plane": self.cusps[:, list(self.info["plane_index"])].tolist(),
             "time": self.time, "n_seeds": self.n_seeds,
             "curves": [c.to_dict() for c in self.curves],
         }

@@ -670,13 +670,25 @@ class ClassifyTask(TaskBase):
     qa: JointVector | None = None
 
 
+_Ranges = Annotated[list[list[float]], PlainValidator(_list_of(_point(2), "ranges [low, high]"))]
+_Section = dict[str, Number]
+_Limits = dict[str, Annotated[list[float], PlainValidator(_point(2))]]
+
+
 class SingularCurvesTask(TaskBase):
-    """Singularity curves on a grid over a range of two coordinates."""
+    """Singular curves traced by continuation (``optkin.singular_curves``): ``plane``
+    ("joint", "workspace" or two coordinate names), ``curves`` (the singularity kind:
+    "parallel", "serial", "limit", "closure", "all" or a list), ``fixed`` (a section,
+    ``{ phi = 0.5 }``), ``limits`` (``{ "L1.theta1" = [lo, hi] }``), ``grid`` (seeding grid
+    only), ``bounds`` (a box in the plane)."""
 
     kind: Literal["singular_curves"]
-    grid: PositiveInt = 100
-    bounds: Annotated[list[list[float]], PlainValidator(
-        _list_of(_point(2), "ranges [low, high]"))] | None = None
+    plane: Str | Annotated[list[str], PlainValidator(_list_of(_string, "names", n=2))] = "joint"
+    curves: Str | Annotated[list[str], PlainValidator(_list_of(_string, "kinds"))] = "parallel"
+    fixed: _Section | None = None
+    limits: _Limits | None = None
+    grid: PositiveInt | None = None
+    bounds: _Ranges | None = None
 
 
 class WorkingModesTask(TaskBase):
@@ -687,12 +699,24 @@ class WorkingModesTask(TaskBase):
 
 
 class AspectsTask(TaskBase):
-    """Aspects: singularity-free connected regions of the workspace."""
+    """Generalized aspects per working mode (``optkin.aspects``): ``fixed`` (a section at
+    fixed phi for 3-DoF platforms), ``limits``, ``grid`` (seeding only), ``bounds``."""
 
     kind: Literal["aspects"]
-    grid: PositiveInt = 50
-    bounds: Annotated[list[list[float]], PlainValidator(
-        _list_of(_point(2), "ranges [low, high]"))] | None = None
+    fixed: _Section | None = None
+    limits: _Limits | None = None
+    grid: PositiveInt | None = None
+    bounds: _Ranges | None = None
+
+
+class WorkspaceTask(TaskBase):
+    """Reachable workspace per working mode and its area (``optkin.workspace``)."""
+
+    kind: Literal["workspace"]
+    fixed: _Section | None = None
+    limits: _Limits | None = None
+    grid: PositiveInt | None = None
+    bounds: _Ranges | None = None
 
 
 def _statics_limits(v: Any) -> float | list:
@@ -787,6 +811,7 @@ TASK_MODELS: dict[str, type[TaskBase]] = {
     "singular_curves": SingularCurvesTask,
     "working_modes": WorkingModesTask,
     "aspects": AspectsTask,
+    "workspace": WorkspaceTask,
     "statics": StaticsTask,
 }
 TASK_KINDS: tuple[str, ...] = tuple(TASK_MODELS)

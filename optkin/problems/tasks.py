@@ -302,9 +302,22 @@ def classify_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
 
 @register("singular_curves")
 def singular_curves_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
-    """``optkin.singular_curves(mech, grid=..., bounds=..., **options)``."""
+    """``optkin.singular_curves(mech, plane=..., kind=curves, fixed=..., ...)`` (+ a PNG)."""
     fn = library_function("singular_curves", "singular_curves")
-    return _generic(fn(mech, **_kw(task, "grid", "bounds"), **dict(task.options)))
+    res = fn(mech, plane=task.plane, kind=task.curves,
+             **_kw(task, "fixed", "limits", "grid", "bounds"), **dict(task.options))
+    return _with_picture(_generic(res), res, ctx)
+
+
+def _with_picture(out: dict[str, Any], res: Any, ctx: TaskContext) -> dict[str, Any]:
+    path = ctx.picture_path()
+    if path is not None and hasattr(res, "plot"):
+        try:
+            res.plot(str(path))
+            out["pictures"] = [path.name]
+        except Exception as e:  # a picture never fails the task
+            ctx.notes.append(f"picture not drawn: {e}")
+    return out
 
 
 @register("working_modes")
@@ -317,9 +330,18 @@ def working_modes_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]
 
 @register("aspects")
 def aspects_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
-    """``optkin.aspects(mech, grid=..., bounds=..., **options)``."""
+    """``optkin.aspects(mech, fixed=..., limits=..., grid=..., bounds=..., **options)``."""
     fn = library_function("aspects", "aspects")
-    return _generic(fn(mech, **_kw(task, "grid", "bounds"), **dict(task.options)))
+    res = fn(mech, **_kw(task, "fixed", "limits", "grid", "bounds"), **dict(task.options))
+    return _with_picture(_generic(res), res, ctx)
+
+
+@register("workspace")
+def workspace_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.workspace(mech, fixed=..., limits=..., grid=..., bounds=..., **options)``."""
+    fn = library_function("workspace", "workspace")
+    res = fn(mech, **_kw(task, "fixed", "limits", "grid", "bounds"), **dict(task.options))
+    return _with_picture(_generic(res), res, ctx)
 
 
 @register("statics")
