@@ -64,6 +64,12 @@ def _polish_phi(a, b, s, phi):
     return np.array([p[0], p[1], np.arctan2(np.sin(phi), np.cos(phi))])
 
 
+def rpr_polynomial(a, b, s):
+    """The univariate polynomial in t = tan(phi/2) of the elimination (coefficients, lowest
+    degree first)."""
+    return _elimination(a, b, s)[0]
+
+
 def rpr_reference(a, b, s, imag_tol=1e-6):
     """All real (x, y, phi) of the 3-RPR with base a (3, 2), platform b (3, 2), legs s.
 
@@ -71,6 +77,26 @@ def rpr_reference(a, b, s, imag_tol=1e-6):
     nearly real (|imag| between imag_tol and 1e-3): a near-double root the floating-point
     count cannot settle.
     """
+    a, b, s = (np.asarray(v, dtype=float) for v in (a, b, s))
+    G = _elimination(a, b, s)[0]
+    roots = np.roots(G[::-1])
+    out: list[np.ndarray] = []
+    ambiguous = False
+    for t in roots:
+        im = abs(t.imag) / max(1.0, abs(t))
+        if im > imag_tol:
+            ambiguous |= im < 1e-3
+            continue
+        sol = _polish_phi(a, b, s, 2 * np.arctan(t.real))
+        if sol is not None and not any(_close(sol, o) for o in out):
+            out.append(sol)
+    sol = _polish_phi(a, b, s, np.pi)  # t = infinity
+    if sol is not None and not any(_close(sol, o) for o in out):
+        out.append(sol)
+    return out, ambiguous
+
+
+def _elimination(a, b, s):
     a, b, s = (np.asarray(v, dtype=float) for v in (a, b, s))
     C, S, W = np.array([1.0, 0.0, -1.0]), np.array([0.0, 2.0]), np.array([1.0, 0.0, 1.0])
     add, sub, mul = Pn.polyadd, Pn.polysub, Pn.polymul
@@ -95,22 +121,7 @@ def rpr_reference(a, b, s, imag_tol=1e-6):
     # equation 1 times D^2 W:  W |N|^2 + 2 D N.(W d_1) + D^2 e_1 = 0
     G = add(mul(W, add(mul(Nx, Nx), mul(Ny, Ny))),
             add(sc(2, mul(D, add(mul(Nx, dW[0][0]), mul(Ny, dW[0][1])))), mul(mul(D, D), e[0])))
-    G = np.trim_zeros(G, "b")
-    roots = np.roots(G[::-1])
-    out: list[np.ndarray] = []
-    ambiguous = False
-    for t in roots:
-        im = abs(t.imag) / max(1.0, abs(t))
-        if im > imag_tol:
-            ambiguous |= im < 1e-3
-            continue
-        sol = _polish_phi(a, b, s, 2 * np.arctan(t.real))
-        if sol is not None and not any(_close(sol, o) for o in out):
-            out.append(sol)
-    sol = _polish_phi(a, b, s, np.pi)  # t = infinity
-    if sol is not None and not any(_close(sol, o) for o in out):
-        out.append(sol)
-    return out, ambiguous
+    return np.trim_zeros(G, "b"), (D, Nx, Ny)
 
 
 def _close(u, v, tol=1e-7):

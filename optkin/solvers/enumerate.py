@@ -195,20 +195,40 @@ def shoemake(U: np.ndarray) -> np.ndarray:
     return q * np.where(q[:, :1] < 0, -1.0, 1.0)
 
 
-_SOBOL: dict[tuple[int, int], qmc.Sobol] = {}
+_SOBOL: dict[int, np.ndarray] = {}
 _FORM_OK: dict[str, bool] = {}
 
 
-def _sobol(dim: int, seed: int) -> qmc.Sobol:
-    """A scrambled Sobol engine, reset to its first point (engines are cached: building
-    one costs more than a small enumeration)."""
-    eng = _SOBOL.get((dim, seed))
-    if eng is None:
-        eng = qmc.Sobol(dim, scramble=True, seed=seed)
-        _SOBOL[(dim, seed)] = eng
-    else:
-        eng.reset()
-    return eng
+class _ShiftedSobol:
+    """Sobol points with a random Cranley-Patterson shift: (u + shift(seed)) mod 1.
+
+    The unscrambled points of each dimension are generated once and cached, so a run costs
+    one small random draw instead of building a scrambled engine (which costs more than a
+    small enumeration); the shift makes runs with different seeds independent randomised
+    quasi-Monte Carlo samples.
+    """
+
+    def __init__(self, dim: int, seed: int) -> None:
+        self.dim = dim
+        self.shift = np.random.default_rng(seed).random(dim)
+        self.pos = 0
+
+    def random(self, n: int) -> np.ndarray:
+        base = _SOBOL.get(self.dim)
+        need = self.pos + n
+        if base is None or base.shape[0] < need:
+            m = max(1024, 1 << int(np.ceil(np.log2(need))))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                base = qmc.Sobol(self.dim, scramble=False).random(m)
+            _SOBOL[self.dim] = base
+        U = base[self.pos:need] + self.shift
+        self.pos = need
+        return U - np.floor(U)
+
+
+def _sobol(dim: int, seed: int) -> _ShiftedSobol:
+    return _ShiftedSobol(dim, seed)
 
 
 class _Starts:
@@ -498,7 +518,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         step_max = 1.0 if small else 0.3
     fmap, setup, compiled = _mapped_step(model, width, float(step_max), unroll, jit, threads)
     t0 = timer()
-    QA = ca.DM(np.tile(qa[:, None], (1, width)))
+    QA = qa  # broadcast by the map to every column
     issued = min(width, budget)
     X = starts.take(width)
     live = np.zeros(width, dtype=bool)
