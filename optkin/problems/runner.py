@@ -569,6 +569,8 @@ def _run_pool(jobs: int, todo: list[tuple[ProblemFileInfo, bytes]], pictures: bo
 
     method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
     ctx = mp.get_context(method)
+    if method == "forkserver":  # workers fork from a server that has optkin imported
+        ctx.set_forkserver_preload(["optkin.problems.runner"])
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx)
     try:
         futures: dict[Future, ProblemFileInfo] = {
