@@ -398,3 +398,24 @@ def test_functions_are_built_once_per_mechanism():
     f1 = analysis_functions(m)
     optkin.jacobians(m, optkin.forward(m, [0.5]))
     assert analysis_functions(M.four_bar(1.0, 2.0, 2.0, 2.5)) is f1
+
+
+@pytest.mark.parametrize("name", ["optkin.analysis.velocity", "optkin.analysis.mobility",
+                                  "optkin.analysis.singularity", "optkin.analysis.maps"])
+def test_docstring_examples_of_the_analyses(name):
+    import doctest
+    import importlib
+
+    failures, tried = doctest.testmod(importlib.import_module(name),
+                                      optionflags=doctest.ELLIPSIS)
+    assert tried > 0 and failures == 0
+
+
+def test_accel_term_from_all_joint_rates_equals_from_active_rates():
+    m = M.akr3000()
+    r = CASES[-1][2][0]
+    jac = optkin.jacobians(m, r)
+    qad = RNG.normal(size=6)
+    a1 = np.r_[jac.accel_term(qad)]
+    a2 = np.r_[jac.accel_term(qdot=jac.joint_rates(qad))]
+    np.testing.assert_allclose(a1, a2, atol=1e-12)

@@ -127,9 +127,14 @@ def _rel_min(M: np.ndarray, k: int | None = None) -> tuple[float, np.ndarray, np
 
 
 def _generic_rank(mech: Mechanism) -> int:
+    """c of [7.59] (cached per mechanism); the intended count when no closure is found."""
     c = _GENERIC_RANK.get(mech.key)
     if c is None:
-        c = dof(mech, samples=3).constraints
+        rep = dof(mech, samples=3)
+        if rep.success:
+            c = rep.constraints
+        else:
+            c = analysis_functions(mech).nvar - mech.dof
         _GENERIC_RANK[mech.key] = c
     return c
 

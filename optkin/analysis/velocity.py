@@ -199,19 +199,29 @@ class Jacobians:
         """End-effector twist J_a qdot_a (rows ``twist_names``)."""
         return self.J_a @ np.asarray(qa_dot, dtype=float)
 
-    def accel_term(self, qa_dot: Any) -> tuple[np.ndarray, np.ndarray]:
-        """(Psi, Phi) of [7.52]: dJ/dt qdot for the velocities produced by ``qa_dot``.
+    def accel_term(self, qa_dot: Any = None, qdot: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        """(Psi, Phi) of [7.52]: (dJ/dt) qdot, by automatic differentiation.
 
+        Give either the active rates ``qa_dot`` (the other rates follow from [7.49]) or,
+        for Khalil mechanisms, all joint rates ``qdot`` (``mech.joint_names`` order).
         Khalil mechanisms: rows in the order of [7.49] (top block Psi, bottom block Phi).
-        Platforms: Psi is the model rows' term d^2f/dt^2 at zero accelerations, Phi is empty.
+        Platforms: Psi is the model rows' second derivative at zero accelerations, Phi is
+        empty.
         """
         f = analysis_functions(self.mech)
-        qa_dot = np.asarray(qa_dot, dtype=float)
         if self.mech.kind == "khalil":
-            qd = self.joint_rates(qa_dot)
+            if qdot is not None:
+                qd = np.asarray(qdot, dtype=float)
+            elif qa_dot is not None:
+                qd = self.joint_rates(qa_dot)
+            else:
+                raise ValueError("accel_term: give qa_dot or qdot")
             a = np.array(f.acc_q(self.q, qd)).ravel()
             top, bot = self.info["rows_top"], self.info["rows_bottom"]
             return a[top], a[bot]
+        if qa_dot is None:
+            raise ValueError("accel_term: give qa_dot (the active rates) for a platform")
+        qa_dot = np.asarray(qa_dot, dtype=float)
         xd = self.W_x @ qa_dot
         a = np.array(f.acc_x(self.qa, self.x, qa_dot, xd)).ravel()
         return a, np.zeros(0)
