@@ -156,6 +156,19 @@ def test_stewart_gough_matches_mr_721():
     m_p = m_s - np.cross(p, f)
     F = statics.static_model(m, s).wrench(tau)
     np.testing.assert_allclose(F, np.concatenate([f, m_p]), atol=1e-10)
+    # spatial capability vs linprog on the hand-written 6 x 6 map (moments about p)
+    G = np.zeros((6, 6))
+    for i, (qi, bi) in enumerate(zip(base, plat)):
+        n = p + R @ bi - qi
+        n /= np.linalg.norm(n)
+        G[:3, i] = n
+        G[3:, i] = np.cross(qi, n) - np.cross(p, n)
+    lim = RNG.uniform(50, 150, 6)
+    D = RNG.normal(size=(6, 6))
+    D /= np.linalg.norm(D, axis=1)[:, None]
+    cap = statics.capability(m, s, lim, D)
+    assert cap.status == "optimal"
+    np.testing.assert_allclose(cap.max, [lp_capability(G, d, -lim, lim) for d in D], rtol=1e-8)
 
 
 def test_khalil_four_bar_virtual_work():
