@@ -161,6 +161,11 @@ def test_rates_match_finite_differences_of_the_forward_map(name, mech, configs):
         # MR spatial twist: v_s = v - omega x p
         fd_s = np.r_[w, v - np.cross(w, r.pose[:3, 3])]
         assert _rel(jac.J_s @ qad, fd_s) < 1e-6, name
+        if mech.kind == "legs":
+            # Chablat-Wenger: A t + B qdot_a = 0 with the differenced twist
+            assert np.max(np.abs(jac.A @ fd_t + jac.B @ qad)) < 1e-6 * max(
+                1.0, float(np.abs(jac.B @ qad).max()))
+            assert np.allclose(jac.B, np.diag(np.diag(jac.B)))  # B is diagonal
         # [7.51] for Khalil mechanisms: W gives the tree's passive joints
         if mech.kind == "khalil":
             ip = [mech.joint_names.index(n) for n in mech.passive_names]
