@@ -636,6 +636,7 @@ class AssemblyModesTask(TaskBase):
     kind: Literal["assembly_modes"]
     qa: JointVector
     seed: NonNegInt = 0
+    draw: Bool = True
 
 
 class TrackTask(TaskBase):

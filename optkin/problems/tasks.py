@@ -261,6 +261,8 @@ def assembly_modes_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any
             s["active_names"] = list(mech.active_names)
             if s.get("pose") is not None:
                 s["task_coordinates"] = _task_coordinates(mech, s["pose"])
+    if getattr(task, "draw", False) and 0 < len(res) <= 16:  # side by side (MR Fig. 7.3b)
+        out["pictures"] = _draw(mech, list(res), ctx)
     return out
 
 
