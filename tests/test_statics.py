@@ -578,3 +578,35 @@ def test_statics_docstring_examples(name):
     failures, tried = doctest.testmod(importlib.import_module(name),
                                       optionflags=doctest.ELLIPSIS)
     assert tried > 0 and failures == 0
+
+
+def test_rrr3_virtual_work_with_hand_written_inverse():
+    """3-RRR (actuated base revolutes): tau . dtheta = F . dx, the crank angles of each
+    working mode by the law of cosines written here."""
+    base = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.9]])
+    plat = np.array([[-0.1, -0.05], [0.1, -0.05], [0.0, 0.1]])
+    l1 = l2 = 0.5
+    m = optkin.mechanisms.rrr3(base, plat, l1, l2)
+
+    def cranks(pose, signs):
+        x, y, phi = pose
+        out = []
+        for a, b, sg in zip(base, plat, signs):
+            d = np.array([x, y]) + rot(phi) @ b - a
+            L = np.hypot(*d)
+            out.append(np.arctan2(d[1], d[0]) + sg * np.arccos((L * L + l1 * l1 - l2 * l2)
+                                                               / (2 * L * l1)))
+        return np.array(out)
+
+    pose = np.array([0.5, 0.35, 0.1])
+    for s in optkin.inverse(m, pose)[:4]:
+        signs = [1 if p == 0 else -1 for p in s.posture]  # posture 0: +beta (leg_inverse)
+        np.testing.assert_allclose(np.cos(cranks(pose, signs) - s.qa), 1.0, atol=1e-12)
+        sm = statics.static_model(m, s)
+        tau = RNG.normal(size=3)
+        F = sm.wrench(tau)
+        for _ in range(2):
+            dx = RNG.normal(size=3)
+            h = 1e-6
+            dth = (cranks(pose + h * dx, signs) - cranks(pose - h * dx, signs)) / (2 * h)
+            assert abs(tau @ dth - F @ dx) < 1e-6 * (1 + abs(F @ dx))
