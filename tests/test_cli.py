@@ -85,7 +85,7 @@ def assert_same_results(a: dict[str, dict], b: dict[str, dict]) -> None:
 def test_bundled_problems_pass_then_resume(tmp_path: Path, capsys) -> None:
     out = tmp_path / "results"
     t0 = time.perf_counter()
-    r = optkin("run", "problems/", "--out", str(out))
+    r = optkin("run", "problems/", "--out", str(out), "--jobs", "2")
     first = time.perf_counter() - t0
     assert r.returncode == 0, r.stdout + r.stderr
     assert "Traceback" not in r.stderr
