@@ -243,10 +243,10 @@ def five_bar_reference(L, th1, th2):
     return circle_intersections(C1, L2, C2, L3), C1, C2
 
 
-def test_five_bar_random_against_circle_intersection():
-    rng = np.random.default_rng(11)
+def _five_bar_cases(n, seed):
+    rng = np.random.default_rng(seed)
     seen = {0: 0, 2: 0}
-    for trial in range(120):
+    for trial in range(n):
         L = rng.uniform(0.5, 2.0, 5)
         th = rng.uniform(-np.pi, np.pi, 2)
         ref, _, _ = five_bar_reference(L, *th)
@@ -261,14 +261,25 @@ def test_five_bar_random_against_circle_intersection():
         seen[len(ref)] += 1
         if ref:
             assert modes.info["complete"]
+    return seen
+
+
+def test_five_bar_random_against_circle_intersection():
+    seen = _five_bar_cases(120, 11)
     assert seen[0] > 5 and seen[2] > 20
 
 
-def test_four_bar_khalil_against_circle_intersection():
+@pytest.mark.slow
+def test_five_bar_200_random_against_circle_intersection():
+    seen = _five_bar_cases(200, 12)
+    assert seen[0] > 10 and seen[2] > 40
+
+
+def _four_bar_cases(n, seed):
     """Khalil table (passive and cut joints unknown): the rocker angle phi."""
-    rng = np.random.default_rng(2)
+    rng = np.random.default_rng(seed)
     n2 = 0
-    for trial in range(40):
+    for trial in range(n):
         L1, L2, L3, L4 = rng.uniform(0.5, 2.5, 4)
         th = rng.uniform(-np.pi, np.pi)
         B = L1 * np.array([np.cos(th), np.sin(th)])
@@ -285,7 +296,25 @@ def test_four_bar_khalil_against_circle_intersection():
             want = np.arctan2(C[1] - D[1], C[0] - D[0])
             assert min(abs(np.angle(np.exp(1j * (p - want)))) for p in phis) < 1e-8
         n2 += len(ref) == 2
-    assert n2 > 10
+    return n2
+
+
+def test_four_bar_khalil_against_circle_intersection():
+    assert _four_bar_cases(40, 2) > 10
+
+
+@pytest.mark.slow
+def test_four_bar_200_random_against_circle_intersection():
+    assert _four_bar_cases(200, 3) > 50
+
+
+def test_docstring_examples():
+    import doctest
+
+    from optkin.solvers import enumerate as en
+
+    failures, tried = doctest.testmod(en, optionflags=doctest.ELLIPSIS)
+    assert tried > 0 and failures == 0
 
 
 # ---------------------------------------------------------------------------------------------
