@@ -327,3 +327,33 @@ def test_dask_unreachable_scheduler_is_a_user_error(small: Path, tmp_path: Path,
                  "--scheduler", "tcp://127.0.0.1:9"])
     assert code == 2
     assert "--scheduler: cannot connect" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="pty with a window size")
+def test_progress_bar_on_a_terminal(small: Path, tmp_path: Path) -> None:
+    import fcntl
+    import pty
+    import struct
+    import termios
+
+    argv = [sys.executable, "-m", "optkin", "run", str(small / "rpr3.toml"),
+            str(small / "four_bar.toml"), "--out", str(tmp_path / "o"), "--no-pictures"]
+    pid, fd = pty.fork()
+    if pid == 0:  # child: a 100-column terminal
+        fcntl.ioctl(1, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 100, 0, 0))
+        os.chdir(ROOT)
+        os.execv(sys.executable, argv)
+    out = b""
+    while True:
+        try:
+            chunk = os.read(fd, 4096)
+        except OSError:
+            break
+        if not chunk:
+            break
+        out += chunk
+    _, status = os.waitpid(pid, 0)
+    text = out.decode(errors="replace")
+    assert os.waitstatus_to_exitcode(status) == 0, text
+    assert "2/2 [" in text and "problem" in text  # the tqdm bar
+    assert "4/4 task(s) passed" in text
