@@ -6,10 +6,11 @@ for Khalil mechanisms over two active joints (the others fixed), solving the dir
 with warm starts along the grid. At each point it evaluates, from :func:`optkin.jacobians`
 (dimensionless matrices, as in :func:`optkin.classify`):
 
-* ``parallel``: sigma_min / sigma_max of A (platforms) or of W_p (Khalil) - zero at a
-  parallel (PSFK/MSFK) singularity;
-* ``serial``: the smallest leg margin |B_ii| / |[A_i, B_i]| (platforms), or sigma_min /
-  sigma_max of the task rows of J_a (Khalil) - zero at a serial singularity;
+* ``parallel``: the parallel margin of :func:`optkin.classify` (sigma_min of A, or of W_p
+  for Khalil mechanisms, relative to the constraint Jacobian) - zero at a parallel
+  (PSFK/MSFK) singularity;
+* ``serial``: the serial margin of :func:`optkin.classify` (smallest leg margin
+  |B_ii| / |[A_i, B_i]|, or the J1 margin of Khalil mechanisms) - zero at a serial one;
 * ``distance``: min(parallel, serial);
 * ``manipulability``: Yoshikawa's sqrt(det(J J^T)) of the scaled task Jacobian J_a.
 
@@ -65,37 +66,27 @@ class SingularityMap:
 
 
 def _measures(jac: Any) -> dict[str, float]:
+    """The map's measures at one configuration: classify's margins and the manipulability."""
+    from .singularity import classify
+
     mech = jac.mech
     model = get_model(mech)
     L = model.length
     act = np.array(mech.actuated)
     qa_scale = np.where(np.array(mech.revolute)[act], 1.0, L)
+    rep = classify(mech, jac.q)
+    par, ser = rep.margins["parallel"], rep.margins["serial"]
     if mech.kind == "legs":
-        tw = [{"vx": 0, "vy": 1, "vz": 2, "wx": 3, "wy": 4, "wz": 5}[n] for n in jac.twist_names]
-        E = np.array([L if i < 3 else 1.0 for i in tw])
-        A = jac.A / L * E[None, :]
-        B = jac.B / L * qa_scale[None, :]
-        s = np.linalg.svd(A, compute_uv=False)
-        par = float(s[-1] / s[0]) if s[0] > 0 else 0.0
-        leg = [float(np.linalg.norm(B[i]) / np.linalg.norm(np.r_[A[i], B[i]]))
-               for i in range(B.shape[0])]
-        ser = min(leg)
-        J = (1.0 / np.array([L if i < 3 else 1.0 for i in tw]))[:, None] * jac.J_a * qa_scale
+        idx = {"vx": 0, "vy": 1, "vz": 2, "wx": 3, "wy": 4, "wz": 5}
+        rows = [idx[n] for n in jac.twist_names]
+        J = jac.J_a
     else:
-        rows_len = np.array([n.split(".")[-1].startswith("p") for n in model.row_names])
-        rs = np.where(rows_len, 1.0 / L, 1.0)
-        _, Wp, _ = (np.array(v) for v in model.jac(jac.qa, jac.x))
-        Wp = rs[:, None] * Wp * model.x_scale[None, :]
-        s = np.linalg.svd(Wp, compute_uv=False)
-        par = float(s[-1] / s[0]) if s.size and s[0] > 0 else 0.0
         rows = [_TASK_TO_TWIST[t] for t in mech.task]
-        J = np.array([1.0 / L if i < 3 else 1.0 for i in rows])[:, None] * jac.J_a[rows] \
-            * qa_scale[None, :]
-        sj = np.linalg.svd(J, compute_uv=False)
-        ser = float(sj[-1] / sj[0]) if sj[0] > 0 else 0.0
+        J = jac.J_a[rows]
+    J = np.array([1.0 / L if i < 3 else 1.0 for i in rows])[:, None] * J * qa_scale[None, :]
     sv = np.linalg.svd(J, compute_uv=False)
-    man = float(np.prod(sv))
-    return {"parallel": par, "serial": ser, "distance": min(par, ser), "manipulability": man}
+    return {"parallel": float(par), "serial": float(ser), "distance": float(min(par, ser)),
+            "manipulability": float(np.prod(sv))}
 
 
 def singularity_map(

@@ -39,7 +39,7 @@ import numpy as np
 from ..mechanism import Mechanism
 from ..model import get_model
 from ._functions import analysis_functions
-from .mobility import dof
+from .mobility import dof, rank_of
 from .velocity import Jacobians, jacobians, twist_rows
 
 __all__ = ["SingularityReport", "classify", "CLASSIFY_DEFAULTS", "TYPES"]
@@ -113,17 +113,20 @@ class SingularityReport:
         }
 
 
-def _rel_min(M: np.ndarray, k: int | None = None) -> tuple[float, np.ndarray, np.ndarray]:
-    """(sigma_k / sigma_1, U, Vt) with sigma_k the k-th singular value (default the last)."""
+def _rel_min(M: np.ndarray, k: int | None = None, ref: float | None = None
+             ) -> tuple[float, np.ndarray, np.ndarray]:
+    """(sigma_k / ref, U, Vt): the k-th singular value (default the last) relative to
+    ``ref``, the 2-norm of a larger matrix that does not vanish with it (default M's)."""
     if M.size == 0:
         return float("inf"), np.zeros((M.shape[0], 0)), np.zeros((0, M.shape[1]))
     U, s, Vt = np.linalg.svd(M)
     n = min(M.shape) if k is None else k
     if n <= 0:
         return float("inf"), U, Vt
-    if s[0] == 0:
+    ref = float(s[0]) if ref is None else float(ref)
+    if ref <= 0:
         return 0.0, U, Vt
-    return float(s[n - 1] / s[0]), U, Vt
+    return float(s[n - 1] / ref), U, Vt
 
 
 def _generic_rank(mech: Mechanism) -> int:
@@ -209,7 +212,8 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
     pas[np.flatnonzero(act)] = False
 
     # internal: W_p of [7.49] (model level, all unknowns)
-    m_int, U_int, Vt_int = _rel_min(Wp_s)
+    Wa_s = rs[:, None] * Wa_m * qa_scale[None, :]
+    m_int, U_int, Vt_int = _rel_min(Wp_s, ref=np.linalg.norm(np.hstack([Wa_s, Wp_s]), 2))
     margins["internal"] = m_int
     internal = m_int < rtol
     if internal:
@@ -221,13 +225,13 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
         E_scale = np.array([L if i < 3 else 1.0 for i in tw])
         legrows = [i for i, n in enumerate(model.row_names) if n.startswith("leg:")]
         A_s = (jac.A / L) * E_scale[None, :]
-        m_par, _, Vt_par = _rel_min(A_s)
+        B_s = (jac.B / L) * qa_scale[None, :]
+        m_par, _, Vt_par = _rel_min(A_s, ref=np.linalg.norm(np.hstack([A_s, B_s]), 2))
         margins["parallel"] = m_par
         if m_par < rtol:
             types.add("parallel")
             nulls["parallel"] = Vt_par[-1] * E_scale
         # serial: each leg's B_ii against its whole row [A_i, B_i]
-        B_s = (jac.B / L) * qa_scale[None, :]
         leg_m = []
         for i in range(B_s.shape[0]):
             row = np.concatenate([A_s[i], B_s[i]])
@@ -248,35 +252,31 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
             move = float(np.linalg.norm(Kx @ V.T, 2)) / max(float(np.linalg.norm(Ks, 2)), 1e-300)
             if move > np.sqrt(rtol):
                 types.add("parallel")
-        # serial: J1 of [7.60]
-        if not internal:
-            Jt = krs[:, None] * jac.J_a[task_rows] * qa_scale[None, :]
-            margins["serial"], _, Vt_s = _rel_min(Jt)
-            if margins["serial"] < rtol:
-                types.add("serial")
-                nulls["serial"] = Vt_s[-1] * qa_scale
-        else:
-            M = np.vstack([Hs, Ks])
-            s = np.linalg.svd(M, compute_uv=True)
-            Vt = s[2]
-            sv = s[1]
-            rk = int(np.sum(sv > rtol * sv[0]))
-            Z = Vt[rk:]
-            za = Z[:, ~pas] if Z.size else np.zeros((0, int((~pas).sum())))
-            val = float(np.linalg.norm(za, 2)) if za.size else 0.0
-            margins["serial"] = 1.0 - val
-            if val > 1e-3:
-                types.add("serial")
+        # serial: J1 of [7.60]. With M = [H; K_task] split into active columns M_a and
+        # passive ones M_p, some qdot_a != 0 leaves the end effector still iff M_a qdot_a
+        # lies in range(M_p), i.e. iff (I - Q Q^T) M_a loses column rank (Q an orthonormal
+        # basis of range(M_p)). Where W_p is regular this is the rank of J_a's task rows.
+        M = np.vstack([Hs, Ks])
+        Ma, Mp = M[:, ~pas], M[:, pas]
+        U, sp, _ = np.linalg.svd(Mp, full_matrices=False)
+        Q = U[:, : rank_of(sp, rtol)]
+        Rm = Ma - Q @ (Q.T @ Ma)
+        sR = np.linalg.svd(Rm, compute_uv=False)
+        s1 = float(np.linalg.norm(M, 2))
+        margins["serial"] = float(sR[-1] / s1) if s1 > 0 and sR.size else 0.0
+        if sR.size < Ma.shape[1] or margins["serial"] < rtol:
+            types.add("serial")
+            nulls["serial"] = np.linalg.svd(Rm)[2][-1] * qa_scale
 
     # Modern Robotics: configuration space, actuator, end effector
     c = _generic_rank(mech)
-    m_cs, _, _ = _rel_min(Hs, c)
+    m_cs, _, _ = _rel_min(Hs, c, ref=np.linalg.norm(np.vstack([Hs, Ks]), 2))
     margins["configuration_space"] = m_cs
     if m_cs < rtol:
         types.add("configuration_space")
     Hp_s = Hs[:, pas]
     r = min(int(pas.sum()), c)
-    m_act, _, _ = _rel_min(Hp_s, r)
+    m_act, _, _ = _rel_min(Hp_s, r, ref=np.linalg.norm(Hs, 2))
     margins["actuator"] = m_act
     actuator = m_act < rtol
     if actuator:
@@ -288,7 +288,7 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
     # end effector: task twist on the tangent space (generic dimension nvar - c)
     _, _, Vt_h = np.linalg.svd(Hs)
     T = Vt_h[c:].T
-    m_ee, _, Vt_ee = _rel_min(Ks @ T)
+    m_ee, _, Vt_ee = _rel_min(Ks @ T, ref=np.linalg.norm(Ks, 2))
     margins["end_effector"] = m_ee
     if m_ee < rtol:
         types.add("end_effector")
