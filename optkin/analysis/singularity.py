@@ -1,14 +1,18 @@
 """Singularity classification at one configuration: :func:`classify`.
 
-The verdicts, each with the smallest relevant singular value as its margin (of matrices
-made dimensionless: length rows divided and length columns multiplied by the mechanism's
-length scale, then divided by the largest singular value):
+The verdicts, each with the smallest relevant singular value as its margin. The matrices
+are first made dimensionless (length rows divided and length columns multiplied by the
+mechanism's length scale); each margin is then relative to the 2-norm of a matrix that
+does not vanish with it ([W_a W_p] for W_p, [A B] for A, the leg's row [A_i B_i] for B_ii,
+[H; K_task] for H and for J1, H for H_p, K_task for the end-effector map). A verdict holds
+when its margin is below ``rtol``.
 
 ===================== ======================================================================
 ``serial``            J1 of [7.60] singular: some qdot_a != 0 gives no end-effector motion.
                       Platforms: B (Chablat-Wenger) singular - a leg at a PSIK/MSIK pose.
-                      Khalil mechanisms: the task rows of J_a lose rank (or, with W_p
-                      singular, a null motion of [H; K_task] has active components).
+                      Khalil mechanisms: some M_a qdot_a lies in range(M_p) for
+                      M = [H; K_task] = [M_a M_p] (the task rows of J_a lose rank when
+                      W_p is regular).
 ``parallel``          J2 of [7.60] singular: the end effector moves with the actuators
                       locked. Platforms: A singular (PSFK/MSFK); Khalil mechanisms: W_p
                       singular with a null motion that moves the end effector.
