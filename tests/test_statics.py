@@ -610,3 +610,19 @@ def test_rrr3_virtual_work_with_hand_written_inverse():
             h = 1e-6
             dth = (cranks(pose + h * dx, signs) - cranks(pose - h * dx, signs)) / (2 * h)
             assert abs(tau @ dth - F @ dx) < 1e-6 * (1 + abs(F @ dx))
+
+
+def test_capability_many_matches_pose_by_pose():
+    """The batched LP (chunks of poses, last chunk padded) gives the per-pose results,
+    singular poses included."""
+    m = optkin.mechanisms.rpr3(BASE_SYM, PLAT_SYM)
+    poses = [[0.0, 0.0, 0.4], [0.05, -0.02, 0.2], [0.0, 0.0, 0.0], [0.1, 0.1, -0.3],
+             [-0.05, 0.0, 0.7]]
+    sols = [sol_at(m, p) for p in poses]
+    many = statics.capability_many(m, sols, [1.0, 2.0, 1.5], ["fx", "fy", "mz"], chunk=2)
+    assert len(many) == 5
+    for s, r in zip(sols, many):
+        one = statics.capability(m, s, [1.0, 2.0, 1.5], ["fx", "fy", "mz"])
+        assert r.status == one.status and r.direction_status == one.direction_status
+        np.testing.assert_allclose(r.max, one.max, atol=1e-9)
+    assert many[2].status == "singular" and many[2].max[2] == 0.0

@@ -29,7 +29,7 @@ from .results import (
 )
 
 __all__ = [
-    "capability", "capability_polygon", "polytope", "feasible", "wrench_feasible_workspace",
+    "capability", "capability_many", "capability_polygon", "polytope", "feasible", "wrench_feasible_workspace",
     "distribute", "box", "STATICS_DEFAULTS",
 ]
 
@@ -248,21 +248,32 @@ def capability(
     return _capability(sm, lo, hi, D, opts)
 
 
-def _capability(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, D: np.ndarray,
-                opts: dict[str, Any]) -> CapabilityResult:
-    k, na = D.shape[0], sm.na
+def _cap_of(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, opts: dict[str, Any]) -> float:
+    """The capability above which a direction counts as unbounded (serial singularity)."""
     lim = float(max(np.max(hi), np.max(-lo), 1e-300))
     normA = float(np.linalg.norm(sm.A, 2)) if sm.A.size else 1.0
     svB = np.linalg.svd(sm.B, compute_uv=False) if sm.B.size else np.ones(1)
     sB = svB[svB > float(opts["sing_tol"]) * max(svB[0], 1e-300)]
     ref = lim * max(1.0, normA) / max(min(1.0, float(sB.min()) if sB.size else 1.0), 1e-12)
-    cap = float(opts["cap"]) * ref
+    return float(opts["cap"]) * ref
+
+
+def _capability(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, D: np.ndarray,
+                opts: dict[str, Any]) -> CapabilityResult:
+    k = D.shape[0]
+    cap = _cap_of(sm, lo, hi, opts)
     prob = pb.capability_problem(*_shape(sm), k, reuse=bool(opts["reuse"]))
     vals = _params(sm, lo, hi)
     vals.update({"D": D.T.copy(), "cap": cap})
     status, raw, stats, out = pb.solve(prob, vals, opts["solver"])
     s = out["s"] if out["s"] is not None else np.full(k, np.nan)
-    tau = out["tau"].T if out["tau"] is not None else np.full((k, na), np.nan)
+    tau = out["tau"].T if out["tau"] is not None else np.full((k, sm.na), np.nan)
+    return _capability_result(sm, lo, hi, D, s, tau, cap, status, raw, stats, opts)
+
+
+def _capability_result(sm, lo, hi, D, s, tau, cap, status, raw, stats, opts) -> CapabilityResult:
+    k = D.shape[0]
+    tau = np.array(tau, dtype=float)
     dstat = ["optimal"] * k
     smax = np.clip(np.asarray(s, dtype=float), 0.0, None)
     U, Fw = sm.unresisted, sm.free_wrenches
@@ -298,11 +309,66 @@ def _capability(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, D: np.ndarray,
         if nu:
             message += f"; unbounded in {nu} direction(s) (near a serial singularity)"
     return CapabilityResult(
-        directions=D, max=smax, points=points, tau=np.asarray(tau, dtype=float),
+        directions=D, max=smax, points=points, tau=tau,
         direction_status=dstat, success=ok, status=out_status, message=message,
         singularity=sm.singularity, unresisted=sm.unresisted, wrench_names=sm.wrench_names,
         limits=np.column_stack([lo, hi]), cond=sm.cond, stats=stats,
     )
+
+
+def capability_many(
+    mech: Mechanism, qs: Sequence[Any], limits: Any, directions: Any = None,
+    chunk: int = 64, **options: Any,
+) -> list[CapabilityResult]:
+    """:func:`capability` at many configurations, ``chunk`` poses per LP.
+
+    One parametrised problem holds ``chunk`` independent copies of the capability LP (one
+    parameter block A^T, B^T per pose), built once and re-solved chunk after chunk: the
+    per-solve overhead of cvxpy is paid once per chunk instead of once per pose. The
+    results are those of :func:`capability` pose by pose (the LPs are independent).
+
+    Parameters
+    ----------
+    qs : sequence of arrays or KinResults
+        The configurations.
+    chunk : int
+        Poses per LP (the last chunk is padded by repeating its last pose).
+    """
+    opts = merge_options(STATICS_DEFAULTS, options, "capability_many")
+    qs = list(qs)
+    if not qs:
+        return []
+    if int(chunk) < 1:
+        raise StaticsError(f"chunk: expected a positive integer, got {chunk!r}")
+    sms = [static_model(mech, q, float(opts["sing_tol"])) for q in qs]
+    lo, hi = limits_of(limits, sms[0])  # type: ignore[misc]
+    D = _directions(directions, sms[0])
+    k, na = D.shape[0], sms[0].na
+    n = min(int(chunk), len(sms))
+    prob = pb.capability_batch_problem(*_shape(sms[0]), k, n, reuse=bool(opts["reuse"]))
+    out: list[CapabilityResult] = []
+    for c0 in range(0, len(sms), n):
+        block = sms[c0:c0 + n]
+        pad = block + [block[-1]] * (n - len(block))
+        caps = [_cap_of(sm, lo, hi, opts) for sm in pad]
+        vals: dict[str, Any] = {"lo": lo, "hi": hi, "D": D.T.copy(),
+                                "cap": np.repeat(caps, k)}
+        for i, sm in enumerate(pad):
+            vals[f"At{i}"] = sm.A.T.copy()
+            vals[f"Bt{i}"] = sm.B.T.copy()
+            if sm.P.shape[1]:
+                vals[f"Pt{i}"] = sm.P.T.copy()
+        status, raw, stats, res = pb.solve(prob, vals, opts["solver"])
+        stats.extra["poses_in_lp"] = n
+        for i, sm in enumerate(block):
+            if res["s"] is not None:
+                s = res["s"][i * k:(i + 1) * k]
+                tau = res["tau"][:, i * k:(i + 1) * k].T
+            else:
+                s, tau = np.full(k, np.nan), np.full((k, na), np.nan)
+            out.append(_capability_result(sm, lo, hi, D, s, tau, caps[i], status, raw, stats,
+                                          opts))
+    return out
 
 
 def capability_polygon(

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..results import SolverStats
 
-__all__ = ["CvxProblem", "capability_problem", "margin_problem", "distribution_problem",
+__all__ = ["CvxProblem", "capability_problem", "capability_batch_problem", "margin_problem", "distribution_problem",
            "solve", "cvx_status", "clear_cache"]
 
 _CACHE: dict[tuple, CvxProblem] = {}
@@ -121,6 +121,44 @@ def capability_problem(r: int, m: int, na: int, np_: int, k: int, reuse: bool = 
                           time.perf_counter() - t0, threading.Lock())
 
     return _cached(("capability", r, m, na, np_, k), build, reuse)
+
+
+def capability_batch_problem(r: int, m: int, na: int, np_: int, k: int, n: int,
+                             reuse: bool = True) -> CvxProblem:
+    """n independent copies of :func:`capability_problem` (one per pose) in one LP.
+
+    Parameters ``At{i}``, ``Bt{i}`` (``Pt{i}``) per pose, shared ``D``, ``lo``, ``hi`` and
+    a ``cap`` per (pose, direction); columns i*k .. (i+1)*k-1 of L and s belong to pose i.
+    """
+
+    def build() -> CvxProblem:
+        t0 = time.perf_counter()
+        prm: dict[str, cp.Parameter] = {
+            "hi": cp.Parameter(na, nonneg=True, name="tau_hi"),
+            "lo": cp.Parameter(na, nonpos=True, name="tau_lo"),
+            "D": cp.Parameter((m, k), name="directions"),
+            "cap": cp.Parameter(n * k, nonneg=True, name="cap"),
+        }
+        L = cp.Variable((r, n * k), name="lambda")
+        s = cp.Variable(n * k, name="s")
+        taus = []
+        cons = [s >= 0, s <= prm["cap"]]
+        H, Lo = _col(prm["hi"], na, k), _col(prm["lo"], na, k)
+        for i in range(n):
+            At = prm[f"At{i}"] = cp.Parameter((m, r), name=f"A_T{i}")
+            Bt = prm[f"Bt{i}"] = cp.Parameter((na, r), name=f"B_T{i}")
+            Li, si = L[:, i * k:(i + 1) * k], s[i * k:(i + 1) * k]
+            tau = -Bt @ Li
+            taus.append(tau)
+            cons += [At @ Li == prm["D"] @ cp.diag(si), tau <= H, tau >= Lo]
+            if np_:
+                Pt = prm[f"Pt{i}"] = cp.Parameter((np_, r), name=f"P_T{i}")
+                cons.append(Pt @ Li == 0)
+        prob = cp.Problem(cp.Maximize(cp.sum(s)), cons)
+        return CvxProblem(prob, prm, {"L": L, "s": s, "tau": cp.hstack(taus)}, "HIGHS",
+                          time.perf_counter() - t0, threading.Lock())
+
+    return _cached(("capability_batch", r, m, na, np_, k, n), build, reuse)
 
 
 def margin_problem(r: int, m: int, na: int, np_: int, nv: int, reuse: bool = True
