@@ -722,6 +722,30 @@ def _det_cond(Wp: np.ndarray) -> tuple[float, float]:
     return det, cond
 
 
+def _jac_np(model: Model, qa: np.ndarray, x: np.ndarray):
+    """(Phi, W_p, W_a) as numpy arrays, through the model's buffered (compiled when
+    available) evaluator."""
+    ev = model.fast("W")
+    out = ev(np.asarray(qa, dtype=float), np.asarray(x, dtype=float))
+    pat = _PATTERNS.get(model.mech.key)
+    if pat is None:
+        pat = []
+        for i in (1, 2):
+            sp = ev.f.sparsity_out(i)
+            cols = np.repeat(np.arange(sp.size2()), np.diff(np.array(sp.colind(), dtype=int)))
+            pat.append(((sp.size1(), sp.size2()), np.array(sp.row(), dtype=int), cols))
+        _PATTERNS[model.mech.key] = pat
+    mats = []
+    for (shape, rows, cols), v in zip(pat, out[1:3]):
+        M = np.zeros(shape)
+        M[rows, cols] = v
+        mats.append(M)
+    return out[0].copy(), mats[0], mats[1]
+
+
+_PATTERNS: dict[str, list] = {}  # sparsity of W_p, W_a per mechanism
+
+
 def _corrector(model: Model, qa: np.ndarray, x: np.ndarray, tol: float, max_iter: int,
                max_move: float):
     """Plain Newton from x. Returns (x, ok, iterations, W_p, W_a at x); fails when it does
@@ -729,11 +753,9 @@ def _corrector(model: Model, qa: np.ndarray, x: np.ndarray, tol: float, max_iter
     x0 = x.copy()
     s = model.x_scale
     for k in range(max_iter + 1):
-        phi, Wp, Wa = model.jac(qa, x)
-        phi = phi.full().ravel()
-        Wp = Wp.full()
+        phi, Wp, Wa = _jac_np(model, qa, x)
         if np.max(np.abs(phi)) <= tol:
-            return x, True, k, Wp, Wa.full()
+            return x, True, k, Wp, Wa
         if k == max_iter:
             break
         try:
@@ -792,7 +814,10 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
         the first point not reached, None when complete), ``s_stop`` (fraction of the segment
         into it where the path stopped, or where det W_p crosses zero, interpolated),
         ``qa_stop``, ``message``, ``det`` and ``cond`` (of the scaled W_p at each point
-        reached), ``halvings``.
+        reached), ``max_cond``, ``near_singular`` (indices of points reached with cond above
+        ``cond_near``: the path passed close to a singularity there, where the tracked mode
+        stays on its side, det W_p keeping its sign, while a nearby mode may cross),
+        ``halvings``.
 
     Examples
     --------
@@ -846,8 +871,7 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
                "give another guess, e.g. a result of assembly_modes")
         stopped, s_stop, qa_stop = 0, 0.0, P[0]
     else:
-        _, Wp, Wa = model.jac(P[0], x)
-        Wp, Wa = Wp.full(), Wa.full()
+        _, Wp, Wa = _jac_np(model, P[0], x)
         det, cond = _det_cond(Wp * scale)
         dets.append(det)
         conds.append(cond)
@@ -950,6 +974,8 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
         "reached": len(pts),
         "det": dets,
         "cond": conds,
+        "max_cond": max(conds) if conds else None,
+        "near_singular": [i for i, c in enumerate(conds) if c > cond_near],
         "halvings": halvings,
         "time": timer() - t0,
     }
