@@ -379,3 +379,25 @@ def test_delta_stretched_arm_is_a_serial_singularity():
         rep = optkin.classify(m, s)
         assert "serial" in rep.types and rep.legs_at_psik == (1,)
         assert "PSIK" in rep and "MSIK" in rep
+
+
+def test_open_chain_2r_arm_jacobian_and_stretched_singularity():
+    """A serial 2R arm (no loop) as a Khalil table: J_a's task rows are the textbook
+    [[-l1 s1 - l2 s12, -l2 s12], [l1 c1 + l2 c12, l2 c12]]; the arm is singular exactly
+    when its links are aligned (t2 = 0 or pi)."""
+    l1, l2 = 1.0, 0.8
+    rows = [dict(a=0, mu=1, sigma=0, theta="t1"), dict(a=1, mu=1, sigma=0, d=l1, theta="t2"),
+            dict(a=2, mu=0, sigma=2, d=l2)]
+    m = optkin.Mechanism.from_khalil(rows, end_effector=3, task=("x", "y"))
+    assert optkin.dof(m).mobility == 2
+    for t1, t2 in ((0.3, 0.5), (-1.0, 2.0), (0.7, 0.0), (0.2, np.pi)):
+        q = np.array([t1, t2])
+        jac = optkin.jacobians(m, q)
+        s1, c1, s12, c12 = np.sin(t1), np.cos(t1), np.sin(t1 + t2), np.cos(t1 + t2)
+        ref = [[-l1 * s1 - l2 * s12, -l2 * s12], [l1 * c1 + l2 * c12, l2 * c12]]
+        np.testing.assert_allclose(jac.J_task, ref, atol=1e-12)
+        aligned = abs(np.sin(t2)) < 1e-12
+        rep = optkin.classify(m, q)
+        assert ("serial" in rep.types) == aligned
+        assert ("end_effector" in rep.types) == aligned
+        assert "parallel" not in rep.types

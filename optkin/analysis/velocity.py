@@ -81,6 +81,8 @@ def config_of(mech: Mechanism, q: Any) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 def _solve(M: np.ndarray, R: np.ndarray) -> np.ndarray:
     """M^-1 R for square regular M, else the least-squares / minimum-norm solution."""
+    if M.shape[0] == 0 or M.shape[1] == 0:
+        return np.zeros((M.shape[1],) + R.shape[1:])
     if M.shape[0] == M.shape[1]:
         try:
             if np.linalg.cond(M) < 1e14:
@@ -303,7 +305,7 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
     tw = twist_rows(mech)
     info: dict[str, Any] = {}
     try:
-        info["cond_W_p"] = float(np.linalg.cond(Wp_m))
+        info["cond_W_p"] = float(np.linalg.cond(Wp_m)) if Wp_m.size else 1.0
     except np.linalg.LinAlgError:
         info["cond_W_p"] = float("inf")
     if mech.kind == "khalil":
@@ -315,7 +317,7 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
         ip = np.array([i for i in range(len(names)) if not act[i] and names[i] not in cut], int)
         ic = np.array([i for i in range(len(names)) if names[i] in cut], int)
         Jc = Jq[:, ic]
-        scale = max(1.0, float(np.abs(Jq).max()))
+        scale = max(1.0, float(np.abs(Jq).max())) if Jq.size else 1.0
         has_c = np.any(np.abs(Jc) > 1e-7 * scale, axis=1) if ic.size else np.zeros(len(Jq), bool)
         top = np.flatnonzero(~has_c)
         bot = np.flatnonzero(has_c)
