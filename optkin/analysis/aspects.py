@@ -33,6 +33,7 @@ from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
 from .continuation import (
+    DEFAULT_STEP,
     SingularCurves,
     _full_from_x,
     _split_wrapped,
@@ -357,7 +358,7 @@ def aspects(
                              grid=grid, step=step, limits=limits, cusps=False)
     pidx = curves.info["plane_index"]
     fixed_map = {names.index(k): float(v) for k, v in fixed.items()}
-    snap = 3.0 * float(step or 0.05) * model.length
+    snap = 3.0 * float(step or DEFAULT_STEP) * model.length
     modes = leg_working_modes(mech)
     out: list[Aspect] = []
     wareas = {}
@@ -448,6 +449,60 @@ def _qa_masks(mech, out: list[Aspect], n: int, lim_map) -> tuple[np.ndarray, np.
     return g0, g1
 
 
+def union_area(groups: list[list[Face]], eps: float, snap: float) -> tuple[float, list[Face]]:
+    """Area and faces of the union of regions (lists of faces).
+
+    The rings of every face (outer counter-clockwise, holes clockwise) are arranged
+    together; a copy of a boundary already given by an earlier region (the same arc with
+    the region on the same side, within ``eps``) is dropped first, and the pieces left are
+    snapped together (``snap``). The faces of the arrangement inside some region make up
+    the union.
+    """
+    allf = [f for g in groups for f in g]
+    lines: list[tuple[np.ndarray, bool]] = []
+    for gi, g in enumerate(groups):
+        earlier = [f for gj in range(gi) for f in groups[gj]]
+        for f in g:
+            for R in [f.outer] + list(f.holes):
+                Rn = np.roll(R, -1, axis=0)
+                d = Rn - R
+                ln = np.maximum(np.linalg.norm(d, axis=1), 1e-300)
+                nr = np.stack([d[:, 1], -d[:, 0]], 1) / ln[:, None]
+                mid = 0.5 * (R + Rn)
+                keep = np.ones(len(R), dtype=bool)
+                for h in earlier:
+                    dup = h.contains(mid - eps * nr) & ~h.contains(mid + 3 * eps * nr)
+                    if dup.any():
+                        keep &= ~(dup & (_ring_dist(mid, h) < eps))
+                if keep.all():
+                    lines.append((R, True))
+                    continue
+                if not keep.any():
+                    continue
+                k0 = int(np.flatnonzero(~keep)[0])
+                order = np.roll(np.arange(len(R)), -k0)
+                kk = keep[order]
+                cuts = np.flatnonzero(np.diff(kk.astype(int)) != 0) + 1
+                for part, pk in zip(np.split(order, cuts), np.split(kk, cuts)):
+                    if pk[0]:
+                        pts = np.vstack([R[part], Rn[part[-1:]]])
+                        lines.append((pts, False))
+    out = []
+    for f in faces(lines, snap=snap):
+        if f.point is not None and any(h.contains(f.point[None])[0] for h in allf):
+            out.append(f)
+    return float(sum(f.area for f in out)), out
+
+
+def _ring_dist(P: np.ndarray, f: Face) -> np.ndarray:
+    from .planar import _seg_dist
+
+    rings = [f.outer] + list(f.holes)
+    A = np.vstack(rings)
+    B = np.vstack([np.roll(r, -1, axis=0) for r in rings])
+    return _seg_dist(P, A, B)
+
+
 def workspace(
     mech: Mechanism,
     fixed: Mapping[str, float] | None = None,
@@ -487,24 +542,15 @@ def workspace(
                              grid=grid, step=step, limits=limits, cusps=False)
     pidx = curves.info["plane_index"]
     fixed_map = {names.index(k): float(v) for k, v in fixed.items()}
-    snap = 3.0 * float(step or 0.05) * model.length
+    snap = 3.0 * float(step or DEFAULT_STEP) * model.length
     modes = leg_working_modes(mech)
     regions, areas = {}, {}
-    all_lines = []
     for mode in modes:
         reg = _region_faces(mech, curves, mode, curves.bounds, snap, pidx, fixed_map, lim_map,
                             False)
         regions[mode] = [f for f, _, _ in reg]
         areas[mode] = float(sum(f.area for f in regions[mode]))
-        all_lines += _runs(curves, mode, ("serial", "limit"))
-    all_lines.append((_box(curves.bounds), True))
-    total = []
-    for f in faces(all_lines, snap=snap, dedupe=0.01 * model.length):
-        if f.point is None:
-            continue
-        if any(_label(mech, pidx, fixed_map, f.point, m, lim_map)[0] is not None for m in modes):
-            total.append(f)
-    area = float(sum(f.area for f in total))
+    area, total = union_area([regions[m] for m in modes], 0.01 * model.length, snap)
     ok = curves.success or not has_serial
     return Workspace(mechanism=mech.name, plane=curves.plane, working_modes=modes,
                      regions=regions, areas=areas, total=total, area=area, curves=curves,

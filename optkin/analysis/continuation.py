@@ -27,6 +27,7 @@ Modern Robotics 7.3 (seed 001).
 from __future__ import annotations
 
 import itertools
+import threading
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -42,6 +43,8 @@ from ..model import get_model
 __all__ = ["Curve", "SingularCurves", "singular_curves", "augmented_system"]
 
 TWO_PI = 2.0 * np.pi
+#: Largest continuation step, in scaled units (lengths / mechanism size, radians).
+DEFAULT_STEP = 0.08
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -120,7 +123,15 @@ class _System:
         # one packed input and output: fewer conversions per call in the tracer's loop
         w = ca.vertcat(z, p, lim)
         self.nz = len(self.free_idx)
-        self.GJw = ca.Function("GJw", [w], [ca.vertcat(G, ca.vec(J))])
+        self.GJw = ca.Function("GJw", [w], [ca.densify(ca.vertcat(G, ca.vec(J)))])
+        # a call buffer: ~1 us per evaluation instead of ~60 us through the Python wrapper
+        self._win = np.zeros(self.GJw.nnz_in(0))
+        self._wout = np.zeros(self.GJw.nnz_out(0))
+        self._buf, self._feval = self.GJw.buffer()
+        self._buf.set_arg(0, memoryview(self._win))
+        self._buf.set_res(0, memoryview(self._wout))
+        self._lock = threading.Lock()
+
         # labels of a full point v: det W_p and diag W_a
         if mech.kind == "legs":
             bdiag = ca.vertcat(*[Wa[j, j] for j in range(na)])
@@ -129,6 +140,13 @@ class _System:
         self.aux = ca.Function("aux", [v], [ca.det(Wp), bdiag])
         self.cfun = None if c is None else ca.Function("c", [v, lim], [c])
         self._maps: dict[int, Any] = {}
+
+    def gjw(self, w: np.ndarray) -> np.ndarray:
+        """[G; vec(dG/dz)] at w = [z; p; lim] (through the buffer; thread-safe)."""
+        with self._lock:
+            self._win[:] = w
+            self._feval()
+            return self._wout.copy()
 
     def c_many(self, V: np.ndarray, lim: float) -> np.ndarray:
         """c at the columns of V (nv, N)."""
@@ -320,12 +338,13 @@ class _Tracer:
         self.tol = tol
         self.max_steps = max_steps
         self.curves_z: list[np.ndarray] = []
+        self.curves_bb: list[tuple[np.ndarray, np.ndarray]] = []
         self.bps: list[np.ndarray] = []
         self.bp_dirs: list[np.ndarray] = []
 
     # scaled evaluation ------------------------------------------------------------
     def GJ(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        out = self.sys.GJw(np.concatenate([u * self.scl, self.p, [self.lim]])).full().ravel()
+        out = self.sys.gjw(np.concatenate([u * self.scl, self.p, [self.lim]]))
         m = self.sys.n_rows
         g = out[:m]
         J = out[m:].reshape(self.sys.nz, m).T * self.scl
@@ -394,10 +413,18 @@ class _Tracer:
         return True
 
     def near_known(self, u: np.ndarray, thr: float) -> bool:
-        for Z in self.curves_z:
+        npd = ~self.per
+        for Z, (lo, hi) in zip(self.curves_z, self.curves_bb):
+            if np.any(u[npd] < lo - thr) or np.any(u[npd] > hi + thr):
+                continue
             if _dist_to_polyline(u, Z, self.per) < thr:
                 return True
         return False
+
+    def add_curve(self, Z: np.ndarray) -> None:
+        npd = ~self.per
+        self.curves_z.append(Z)
+        self.curves_bb.append((Z[:, npd].min(axis=0), Z[:, npd].max(axis=0)))
 
     def aug_det(self, J: np.ndarray, t: np.ndarray) -> float:
         return float(np.linalg.det(np.vstack([J, t])))
@@ -420,9 +447,16 @@ class _Tracer:
                     return pts, self._stall_kind(u)
                 continue
             Jn = self.last_J
-            tn = self.tangent(Jn)
-            if tn @ t < 0:
-                tn = -tn
+            try:  # the tangent continuing t: [Jn; t] x = e_n (no SVD)
+                M = np.vstack([Jn, t])
+                e = np.zeros(len(t))
+                e[-1] = 1.0
+                tn = np.linalg.solve(M, e)
+                tn /= np.linalg.norm(tn)
+            except np.linalg.LinAlgError:
+                tn = self.tangent(Jn)
+                if tn @ t < 0:
+                    tn = -tn
             step = np.linalg.norm(un - u)
             if tn @ t < np.cos(0.25) or step > 2 * h:
                 h *= 0.5
@@ -603,7 +637,7 @@ def _trace_all(tr: _Tracer, seeds: list[np.ndarray], dedup: float) -> list[tuple
                 bwd, end2 = tr.run(u0, -t0, True)
                 Z = np.array(bwd[::-1] + fwd[1:])
         closed = end1 == "closed"
-        tr.curves_z.append(Z)
+        tr.add_curve(Z)
         out.append((Z, closed, (end2, end1)))
     return out
 
@@ -773,7 +807,7 @@ def _seeds_legs(sys: _System, cond: str, fixed: dict[int, float], lim: float, n:
         else:
             X[:, :2] = P - b
         for V, ok in _full_from_x(mech, X, pin_leg, qk):
-            seeds += [V[i] for i in np.flatnonzero(ok)[::2]]
+            seeds += [V[i] for i in np.flatnonzero(ok)[::8]]
     return seeds
 
 
@@ -917,7 +951,7 @@ def singular_curves(
         Actuated joint limits (for ``kind="limit"``).
     step : float, optional
         Largest continuation step in scaled units (lengths / mechanism size, radians);
-        default 0.05.
+        default :data:`DEFAULT_STEP`.
     tol : float
         Corrector tolerance on max |G|.
     cusps : bool, optional
@@ -972,7 +1006,7 @@ def singular_curves(
             f"{mech.name}: singular curves support planar RPR/RRR leg mechanisms and 1-DoF "
             "Khalil mechanisms in this version")
     n = int(grid or 32)
-    hmax = float(step or 0.05)
+    hmax = float(step or DEFAULT_STEP)
     # plane bounds
     per2 = (bool(model.x_angle[pidx[0] - na]) if pidx[0] >= na else bool(mech.revolute[np.flatnonzero(np.array(mech.actuated))[pidx[0]]]),
             bool(model.x_angle[pidx[1] - na]) if pidx[1] >= na else bool(mech.revolute[np.flatnonzero(np.array(mech.actuated))[pidx[1]]]))

@@ -108,7 +108,21 @@ def faces(lines: list[tuple[np.ndarray, bool]], snap: float, dedupe: float = 0.0
             if len(other) == 0:
                 continue
             keep[mine] = _seg_dist(M[mine], A[other], B[other]) >= dedupe
-        A, B, pid = A[keep], B[keep], pid[keep]
+        if not keep.all():
+            # the kept pieces become new open polylines, whose ends are snapped as usual
+            new_lines = []
+            for k in np.unique(pid):
+                idx = np.flatnonzero(pid == k)
+                kk = keep[idx]
+                closed = lines[k][1] and kk.all()
+                if closed:
+                    new_lines.append(lines[k])
+                    continue
+                cuts = np.flatnonzero(np.diff(kk.astype(int)) != 0) + 1
+                for part_idx, part_keep in zip(np.split(idx, cuts), np.split(kk, cuts)):
+                    if part_keep[0]:
+                        new_lines.append((np.vstack([A[part_idx], B[part_idx[-1:]]]), False))
+            return faces(new_lines, snap, 0.0)
     n = len(A)
     splits: list[list[float]] = [[0.0, 1.0] for _ in range(n)]
     # snap open ends onto the nearest other segment
@@ -138,34 +152,43 @@ def faces(lines: list[tuple[np.ndarray, bool]], snap: float, dedupe: float = 0.0
             else:
                 B[si] = q
             splits[idx[j]].append(float(t[j]))
-    # pairwise intersections (chunked)
+    # pairwise intersections: bounding-box candidates first (chunked), then the exact test
     d = B - A
-    chunk = max(1, 2_000_000 // max(n, 1))
+    lo, hi = np.minimum(A, B), np.maximum(A, B)
+    chunk = max(1, 4_000_000 // max(n, 1))
+    eps = 1e-12
     for s0 in range(0, n, chunk):
         s1 = min(n, s0 + chunk)
-        a, da = A[s0:s1, None, :], d[s0:s1, None, :]
-        den = da[..., 0] * d[None, :, 1] - da[..., 1] * d[None, :, 0]
-        w = A[None, :, :] - a
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (w[..., 0] * d[None, :, 1] - w[..., 1] * d[None, :, 0]) / den
-            u = (w[..., 0] * da[..., 1] - w[..., 1] * da[..., 0]) / den
-        eps = 1e-12
-        hit = (np.abs(den) > 1e-300) & (t >= -eps) & (t <= 1 + eps) & (u >= -eps) & (u <= 1 + eps)
-        ii, jj = np.nonzero(hit)
+        ov = ((lo[s0:s1, None, 0] <= hi[None, :, 0]) & (hi[s0:s1, None, 0] >= lo[None, :, 0])
+              & (lo[s0:s1, None, 1] <= hi[None, :, 1]) & (hi[s0:s1, None, 1] >= lo[None, :, 1]))
+        ii, jj = np.nonzero(ov)
         ii = ii + s0
         sel = jj > ii
-        for i, j, tt, uu in zip(ii[sel], jj[sel], t[hit][sel], u[hit][sel]):
+        ii, jj = ii[sel], jj[sel]
+        if len(ii) == 0:
+            continue
+        da, db = d[ii], d[jj]
+        den = da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]
+        w = A[jj] - A[ii]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (w[:, 0] * db[:, 1] - w[:, 1] * db[:, 0]) / den
+            u = (w[:, 0] * da[:, 1] - w[:, 1] * da[:, 0]) / den
+        hit = (np.abs(den) > 1e-300) & (t >= -eps) & (t <= 1 + eps) & (u >= -eps) & (u <= 1 + eps)
+        for i, j, tt, uu in zip(ii[hit], jj[hit], t[hit], u[hit]):
             splits[i].append(float(np.clip(tt, 0, 1)))
             splits[j].append(float(np.clip(uu, 0, 1)))
-    # vertices and edges
-    pts = []
-    edges_raw = []
-    for i in range(n):
+    # vertices and edges: plain segments in bulk, split ones one by one
+    plain = np.array([len(sp) == 2 for sp in splits])
+    ip = np.flatnonzero(plain)
+    pts = list(np.vstack([A[ip], B[ip]])) if len(ip) else []
+    k = len(ip)
+    edges_raw = [(a, a + k) for a in range(k)]
+    for i in np.flatnonzero(~plain):
         ts = np.unique(np.array(splits[i]))
         P = A[i] + ts[:, None] * d[i]
         base = len(pts)
         pts.extend(P)
-        edges_raw += [(base + k, base + k + 1) for k in range(len(ts) - 1)]
+        edges_raw += [(base + q, base + q + 1) for q in range(len(ts) - 1)]
     pts = np.array(pts)
     scale = float(np.max(np.ptp(pts, axis=0))) or 1.0
     tree = cKDTree(pts)
