@@ -401,3 +401,46 @@ def test_open_chain_2r_arm_jacobian_and_stretched_singularity():
         assert ("serial" in rep.types) == aligned
         assert ("end_effector" in rep.types) == aligned
         assert "parallel" not in rep.types
+
+
+def test_four_bar_actuator_singularities_depend_on_the_actuated_joint():
+    """MR 7.3: configuration-space singularities do not depend on which joint is actuated,
+    actuator singularities do. Same C-space sample as above, crank or rocker actuated:
+    crank actuated -> H_p singular iff coupler and rocker are aligned (B, E, D collinear);
+    rocker actuated -> iff crank and coupler are aligned (A, B, E collinear). With the
+    rocker locked on the branch E = A the crank and coupler still turn together (|B - A| =
+    L1 = L2): a degenerate actuator singularity."""
+    L1, L2, L3, L4 = 4.0, 4.0, 2.0, 2.0
+    crank = M.four_bar(L1, L2, L3, L4)
+    spec = crank.to_dict()
+    rows = [dict(r) for r in spec["rows"]]
+    rows[0]["mu"], rows[2]["mu"] = 0, 1  # actuate the rocker (frame 3, phi) instead
+    rocker = optkin.Mechanism.from_khalil(rows, loops=1, params=spec["params"], end_effector=1,
+                                          task=("rz",), name="four-bar (rocker actuated)")
+    A, D = np.zeros(2), np.array([L4, 0.0])
+    seen = {"crank": 0, "rocker": 0, "degenerate": 0}
+    for th in np.arange(0, 2 * np.pi, np.pi / 30):
+        al = 2 * L3 * L4 - 2 * L1 * L3 * np.cos(th)
+        be = -2 * L1 * L3 * np.sin(th)
+        ga = L2**2 - L4**2 - L3**2 - L1**2 + 2 * L1 * L4 * np.cos(th)
+        c = np.clip(ga / np.hypot(al, be), -1, 1)
+        for sgn in (1, -1):
+            ph = np.arctan2(be, al) + sgn * np.arccos(c)
+            B = L1 * np.array([np.cos(th), np.sin(th)])
+            E = D + L3 * np.array([np.cos(ph), np.sin(ph)])
+            t2 = np.arctan2(*(E - B)[::-1]) - th
+            q = np.array([th, t2, ph, ph - th - t2])
+            rc, rr = optkin.classify(crank, q), optkin.classify(rocker, q)
+            every = _collinear(A, B, E, D, tol=1e-8)
+            assert ("configuration_space" in rc.types) == every
+            assert ("configuration_space" in rr.types) == every
+            exp_c = _collinear(B, E, D, tol=1e-8)
+            exp_r = _collinear(A, B, E, tol=1e-8)
+            assert ("actuator" in rc.types) == exp_c, (th, ph)
+            assert ("actuator" in rr.types) == exp_r, (th, ph)
+            if exp_r and not every:
+                assert "actuator_degenerate" in rr.types
+                seen["degenerate"] += 1
+            seen["crank"] += exp_c
+            seen["rocker"] += exp_r
+    assert seen["crank"] >= 2 and seen["degenerate"] > 20
