@@ -217,7 +217,8 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
 
     # internal: W_p of [7.49] (model level, all unknowns)
     Wa_s = rs[:, None] * Wa_m * qa_scale[None, :]
-    m_int, U_int, Vt_int = _rel_min(Wp_s, ref=np.linalg.norm(np.hstack([Wa_s, Wp_s]), 2))
+    ref_int = float(np.linalg.norm(np.hstack([Wa_s, Wp_s]), 2))
+    m_int, U_int, Vt_int = _rel_min(Wp_s, ref=ref_int)
     margins["internal"] = m_int
     internal = m_int < rtol
     if internal:
@@ -227,7 +228,6 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
     # parallel
     if mech.kind == "legs":
         E_scale = np.array([L if i < 3 else 1.0 for i in tw])
-        legrows = [i for i, n in enumerate(model.row_names) if n.startswith("leg:")]
         A_s = (jac.A / L) * E_scale[None, :]
         B_s = (jac.B / L) * qa_scale[None, :]
         m_par, _, Vt_par = _rel_min(A_s, ref=np.linalg.norm(np.hstack([A_s, B_s]), 2))
@@ -245,12 +245,11 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
         legs_psik = tuple(i + 1 for i, v in enumerate(leg_m) if v < rtol)
         if legs_psik:
             types.add("serial")
-        del legrows
     else:
         margins["parallel"] = m_int
         if internal:
             sv = np.linalg.svd(Wp_s, compute_uv=False)
-            k = int(np.sum(sv < rtol * sv[0])) + (Wp_s.shape[1] - sv.size)
+            k = int(np.sum(sv < rtol * ref_int)) + (Wp_s.shape[1] - sv.size)
             V = Vt_int[-max(k, 1):]
             Kx = Ks[:, pas]
             move = float(np.linalg.norm(Kx @ V.T, 2)) / max(float(np.linalg.norm(Ks, 2)), 1e-300)
@@ -285,7 +284,7 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
     actuator = m_act < rtol
     if actuator:
         types.add("actuator")
-        deg, q2 = _degenerate(jac, model, f, Wp_s, rs, rtol, tol2)
+        deg, q2 = _degenerate(jac, model, f, Wp_s, rs, rtol * ref_int, tol2)
         margins["actuator_degenerate"] = q2
         if deg:
             types.add("actuator_degenerate")
@@ -308,7 +307,7 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
 
 
 def _degenerate(jac: Jacobians, model: Any, f: Any, Wp_s: np.ndarray, rs: np.ndarray,
-                rtol: float, tol2: float) -> tuple[bool, float]:
+                atol: float, tol2: float) -> tuple[bool, float]:
     """Second-order test at an actuator singularity with the actuators locked.
 
     With u_j the left and V the right null vectors of W_p (scaled), the locked mechanism can
@@ -318,10 +317,10 @@ def _degenerate(jac: Jacobians, model: Any, f: Any, Wp_s: np.ndarray, rs: np.nda
     U, s, Vt = np.linalg.svd(Wp_s)
     if s.size == 0:
         return False, float("nan")
-    k_r = int(np.sum(s < rtol * s[0])) + (Wp_s.shape[1] - s.size)
-    k_l = int(np.sum(s < rtol * s[0])) + (Wp_s.shape[0] - s.size)
-    if k_r == 0 or k_l == 0:
-        return False, float("nan")
+    small = int(np.sum(s < atol))
+    # at least one direction: this runs only at an actuator singularity (H_p rank-deficient)
+    k_r = max(1, small + (Wp_s.shape[1] - s.size))
+    k_l = max(1, small + (Wp_s.shape[0] - s.size))
     V = Vt[-k_r:].T  # scaled x directions
     Ul = U[:, -k_l:]
     Ms = []
