@@ -626,3 +626,21 @@ def test_capability_many_matches_pose_by_pose():
         assert r.status == one.status and r.direction_status == one.direction_status
         np.testing.assert_allclose(r.max, one.max, atol=1e-9)
     assert many[2].status == "singular" and many[2].max[2] == 0.0
+
+
+def test_workspace_marks_singular_poses():
+    """Homothetic 3-RPR at phi = 0: the legs always meet (at the centre of homothety), so
+    no wrench with a moment about that point is resisted; margins equal feasible()."""
+    m = optkin.mechanisms.rpr3(BASE_SYM, PLAT_SYM)
+    b = [[-0.2, 0.2], [-0.2, 0.2]]
+    ws = statics.wrench_feasible_workspace(m, {"lower": [0, 0, -0.01], "upper": [0, 0, 0.01]},
+                                           1.0, grid=3, bounds=b, fixed=[0, 0, 0])
+    assert ws.point_status == ["singular"] * 9 and np.all(ws.margin == -np.inf)
+    forces = {"lower": [-0.3, -0.3, 0.0], "upper": [0.3, 0.3, 0.0]}
+    ws = statics.wrench_feasible_workspace(m, forces, 1.0, grid=3, bounds=b, fixed=[0, 0, 0])
+    # only at the centre do the legs meet at the platform origin, where a pure force has no
+    # moment about the meeting point; elsewhere it has one and is not resisted
+    assert ws.point_status == ["singular"] * 4 + ["feasible"] + ["singular"] * 4
+    for pose, mu in zip(ws.poses, ws.margin):
+        one = statics.feasible(m, sol_at(m, pose), forces, 1.0)
+        np.testing.assert_allclose(mu, one.margin, atol=1e-7)

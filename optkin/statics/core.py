@@ -40,6 +40,7 @@ STATICS_DEFAULTS: dict[str, Any] = {
     "reuse": True,  # False rebuilds the cvxpy problem (benchmark baseline)
     "cap": 1e6,  # capability above cap * (limit scale) counts as unbounded
     "dir_tol": 1e-7,  # |U^T d| above this: direction d not resisted (parallel singularity)
+    "chunk": 64,  # poses per LP in capability_many / wrench_feasible_workspace
 }
 
 
@@ -566,6 +567,23 @@ def _feasible(sm: StaticModel, lo, hi, V, opts) -> FeasibilityResult:
                              stats=stats)
 
 
+def _margins_batch(sms: list[StaticModel], lo, hi, V, n: int, opts: dict[str, Any]
+                   ) -> tuple[list[float], list[str]]:
+    """Margins of the wrench set V at several poses: one LP of n independent blocks."""
+    prob = pb.margin_batch_problem(*_shape(sms[0]), V.shape[0], n, reuse=bool(opts["reuse"]))
+    pad = sms + [sms[-1]] * (n - len(sms))
+    vals: dict[str, Any] = {"lo": lo, "hi": hi, "W": V.T.copy()}
+    for i, sm in enumerate(pad):
+        vals[f"At{i}"] = sm.A.T.copy()
+        vals[f"Bt{i}"] = sm.B.T.copy()
+        if sm.P.shape[1]:
+            vals[f"Pt{i}"] = sm.P.T.copy()
+    status, _, _, out = pb.solve(prob, vals, opts["solver"])
+    if status in ("optimal", "inaccurate") and out["mu"] is not None:
+        return [float(v) for v in out["mu"][: len(sms)]], ["ok"] * len(sms)
+    return [np.nan] * len(sms), ["fallback"] * len(sms)
+
+
 def wrench_feasible_workspace(
     mech: Mechanism,
     wrench_set: Any,
@@ -631,11 +649,9 @@ def wrench_feasible_workspace(
     N = P.shape[0]
     margin = np.full(N, np.nan)
     feas = np.zeros(N, dtype=bool)
-    pstat: list[str] = []
+    pstat: list[str] = ["unreachable"] * N
     t0 = time.perf_counter()
-    lohi = None
-    V = None
-    nsolve = 0
+    sms: dict[int, StaticModel] = {}
     for i in range(N):
         sols = inverse(mech, P[i])
         sol = None
@@ -644,23 +660,36 @@ def wrench_feasible_workspace(
             sol = next((s for s in sols if s.working_mode == wm), None)
         elif len(sols) > posture:
             sol = sols[posture]
-        if sol is None or not sol.success:
-            pstat.append("unreachable")
-            continue
-        sm = static_model(mech, sol, float(opts["sing_tol"]))
-        if lohi is None:
-            lohi = limits_of(limits, sm)
-            V = _wrench_set(wrench_set, sm)
-        r = _feasible(sm, lohi[0], lohi[1], V, opts)
-        nsolve += 1
-        margin[i] = r.margin
-        feas[i] = r.feasible
-        if r.status == "singular":
-            pstat.append("singular")
-        elif not r.success:
-            pstat.append(r.status)
-        else:
-            pstat.append("feasible" if r.feasible else "infeasible")
+        if sol is not None and sol.success:
+            sms[i] = static_model(mech, sol, float(opts["sing_tol"]))
+    nsolve = 0
+    if sms:
+        first = next(iter(sms.values()))
+        lo, hi = limits_of(limits, first)  # type: ignore[misc]
+        V = _wrench_set(wrench_set, first)
+        todo = []
+        for i, sm in sms.items():
+            U = sm.unresisted
+            if U.shape[1] and any(np.linalg.norm(U.T @ v) > float(opts["dir_tol"]) * max(
+                    1.0, np.linalg.norm(v)) for v in V):
+                margin[i], pstat[i] = -np.inf, "singular"
+            else:
+                todo.append(i)
+        n = max(1, min(int(opts.get("chunk", 64)), len(todo))) if todo else 1
+        for c0 in range(0, len(todo), n):
+            idx = todo[c0:c0 + n]
+            mus, st = _margins_batch([sms[i] for i in idx], lo, hi, V, n, opts)
+            nsolve += 1
+            for i, mu, sti in zip(idx, mus, st):
+                if sti == "fallback":  # the batch failed: solve this pose alone
+                    r = _feasible(sms[i], lo, hi, V, opts)
+                    nsolve += 1
+                    mu = r.margin
+                    sti = "singular" if r.status == "singular" else (
+                        r.status if not r.success else "ok")
+                margin[i] = mu
+                feas[i] = bool(mu >= -1e-9)
+                pstat[i] = ("feasible" if feas[i] else "infeasible") if sti == "ok" else sti
     dt = time.perf_counter() - t0
     nreach = sum(1 for s in pstat if s != "unreachable")
     nerr = sum(1 for s in pstat if s not in ("feasible", "infeasible", "unreachable", "singular"))

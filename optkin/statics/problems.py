@@ -21,7 +21,8 @@ import numpy as np
 
 from ..results import SolverStats
 
-__all__ = ["CvxProblem", "capability_problem", "capability_batch_problem", "margin_problem", "distribution_problem",
+__all__ = ["CvxProblem", "capability_problem", "capability_batch_problem", "margin_problem",
+           "margin_batch_problem", "distribution_problem",
            "solve", "cvx_status", "clear_cache"]
 
 _CACHE: dict[tuple, CvxProblem] = {}
@@ -189,6 +190,39 @@ def margin_problem(r: int, m: int, na: int, np_: int, nv: int, reuse: bool = Tru
                           time.perf_counter() - t0, threading.Lock())
 
     return _cached(("margin", r, m, na, np_, nv), build, reuse)
+
+
+def margin_batch_problem(r: int, m: int, na: int, np_: int, nv: int, n: int,
+                         reuse: bool = True) -> CvxProblem:
+    """n independent copies of :func:`margin_problem` (one per pose, each its own mu_i,
+    maximising the sum); parameters ``At{i}``, ``Bt{i}`` (``Pt{i}``), shared W, lo, hi."""
+
+    def build() -> CvxProblem:
+        t0 = time.perf_counter()
+        prm: dict[str, cp.Parameter] = {
+            "hi": cp.Parameter(na, nonneg=True, name="tau_hi"),
+            "lo": cp.Parameter(na, nonpos=True, name="tau_lo"),
+            "W": cp.Parameter((m, nv), name="wrenches"),
+        }
+        L = cp.Variable((r, n * nv), name="lambda")
+        mu = cp.Variable(n, name="mu")
+        H, Lo = _col(prm["hi"], na, nv), _col(prm["lo"], na, nv)
+        cons = [mu <= 1]
+        for i in range(n):
+            At = prm[f"At{i}"] = cp.Parameter((m, r), name=f"A_T{i}")
+            Bt = prm[f"Bt{i}"] = cp.Parameter((na, r), name=f"B_T{i}")
+            Li = L[:, i * nv:(i + 1) * nv]
+            tau = -Bt @ Li
+            cons += [At @ Li == prm["W"], tau <= cp.multiply(H, 1 - mu[i]),
+                     tau >= cp.multiply(Lo, 1 - mu[i])]
+            if np_:
+                Pt = prm[f"Pt{i}"] = cp.Parameter((np_, r), name=f"P_T{i}")
+                cons.append(Pt @ Li == 0)
+        prob = cp.Problem(cp.Maximize(cp.sum(mu)), cons)
+        return CvxProblem(prob, prm, {"L": L, "mu": mu}, "HIGHS", time.perf_counter() - t0,
+                          threading.Lock())
+
+    return _cached(("margin_batch", r, m, na, np_, nv, n), build, reuse)
 
 
 def distribution_problem(r: int, m: int, na: int, np_: int, norm: str, limited: bool,
