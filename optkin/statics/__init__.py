@@ -8,9 +8,16 @@ effector APPLIES to the environment (moments about the end-effector point, base 
 tau the actuator forces; the load resisted is -F. See :mod:`optkin.statics.model`.
 
 The analyses are convex programs built once per problem shape with ``cp.Parameter`` s and
-re-solved at every pose (cvxpy DPP): :func:`capability` (LP), :func:`feasible` and
-:func:`wrench_feasible_workspace` (LP margin), :func:`distribute` (QP or LP); the capability
-polytope (:func:`polytope`) is the zonotope of the actuator box.
+re-solved at every pose (cvxpy DPP): :func:`capability` (LP; :func:`capability_many` puts
+a chunk of poses in one LP), :func:`feasible` and :func:`wrench_feasible_workspace` (LP
+margin), :func:`distribute` (QP or LP); the capability polytope (:func:`polytope`) is the
+zonotope of the actuator box. Pictures: :func:`plot_capability` (via
+:func:`capability_polygon`) and :func:`plot_workspace`.
+
+Singular configurations are results, not errors: at a parallel singularity the wrenches
+that do work on the twist the platform can follow with locked actuators get capability 0
+(``direction_status`` ``"unresisted"``, ``status="singular"``); at a serial singularity
+the wrenches carried without actuator force are ``"unbounded"``.
 """
 
 from .core import (

@@ -29,8 +29,8 @@ from .results import (
 )
 
 __all__ = [
-    "capability", "capability_many", "capability_polygon", "polytope", "feasible", "wrench_feasible_workspace",
-    "distribute", "box", "STATICS_DEFAULTS",
+    "capability", "capability_many", "capability_polygon", "polytope", "feasible",
+    "wrench_feasible_workspace", "distribute", "box", "limits_of", "STATICS_DEFAULTS",
 ]
 
 #: Options shared by the statics analyses and their defaults.
