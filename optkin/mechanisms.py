@@ -262,7 +262,9 @@ def akr3000(
         dict(a=7, mu=0, sigma=2, gamma="g13", b=0, alpha=0, d="d13", theta=0, r=0),
         dict(a=2, mu=0, sigma=2, gamma="g14", b=0, alpha=0, d="d14", theta=0, r=0),
     ]
-    return Mechanism.from_khalil(rows, loops=2, params=params, end_effector=10, name="AKR-3000")
+    # the cylinders r5 and r6 only extend: negative lengths are not physical postures
+    return Mechanism.from_khalil(rows, loops=2, params=params, end_effector=10, name="AKR-3000",
+                                 limits={"r5": (0.0, None), "r6": (0.0, None)})
 
 
 #: name -> factory, for problem files and the command line.

@@ -78,6 +78,15 @@ def _four_bar_rows():
     ]
 
 
+def test_limit_errors():
+    with pytest.raises(MechanismError, match=r"limits.t9: unknown joint"):
+        Mechanism.from_khalil(rows(), limits={"t9": (0, 1)})
+    with pytest.raises(MechanismError, match=r"limits.t1: need lower < upper"):
+        Mechanism.from_khalil(rows(), limits={"t1": (1, 0)})
+    with pytest.raises(MechanismError, match=r"limits.t1: expected \(lower, upper\)"):
+        Mechanism.from_khalil(rows(), limits={"t1": 3})
+
+
 def test_cut_frame_without_partner():
     r = _four_bar_rows()
     r[4]["sigma"] = 0

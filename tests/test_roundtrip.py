@@ -159,7 +159,14 @@ def test_akr3000_inverse_roundtrip():
     q["r5"] = float(np.linalg.norm(O[13] - O[3]))
     q["r6"] = float(np.linalg.norm(O[14] - O[4]))
     qa = [q[n] for n in m.active_names]
-    _khalil_roundtrip(m, qa, None)
+    sols = _khalil_roundtrip(m, qa, None)
+    # the path theta1, theta2, theta7 + spherical wrist (frames 8-10 share an origin) has
+    # 2 x 2 x 2 = 8 solutions; for each, each loop closes with the cylinder length +- |d|,
+    # and only the positive lengths are postures (limits r5, r6 >= 0): 8 kept, 24 left out
+    assert len(sols) == 8
+    assert sols.info["outside_limits"] == 24
+    i5, i6 = m.joint_names.index("r5"), m.joint_names.index("r6")
+    assert all(s.q[i5] > 0 and s.q[i6] > 0 for s in sols)
 
 
 def test_unreachable_leg_lengths_fail_cleanly():

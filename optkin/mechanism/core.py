@@ -54,7 +54,7 @@ class Mechanism:
 
     __slots__ = (
         "name", "kind", "joint_names", "actuated", "revolute", "dof", "planar", "table",
-        "end_effector", "task", "legs", "platform", "home", "params", "redundant", "_spec",
+        "end_effector", "task", "legs", "platform", "home", "params", "redundant", "limits", "_spec",
         "_key",
         "__weakref__",
     )
@@ -76,6 +76,7 @@ class Mechanism:
         task: Sequence[str] | None = None,
         home: Mapping[str, float] | Sequence[float] | None = None,
         dof: int | None = None,
+        limits: Mapping[str, Sequence[float | None]] | None = None,
     ) -> Mechanism:
         """A mechanism from its Khalil table (seed 000, Tables 7.1 and 7.2).
 
@@ -97,6 +98,9 @@ class Mechanism:
             Default guess for the passive joints (by name, or all joints in order).
         dof : int
             The intended number of degrees of freedom (default: number of actuated joints).
+        limits : mapping
+            Joint limits by name, ``{"r5": (0.0, None)}`` (None: unbounded). Postures outside
+            them are left out of :func:`optkin.inverse`; :func:`optkin.forward` reports them.
 
         Examples
         --------
@@ -145,6 +149,7 @@ class Mechanism:
         m.platform = None
         m.params = dict(table.params)
         m.home = m._home_vector(home)
+        m.limits = m._check_limits(limits)
         m._spec = {
             "kind": "khalil",
             "name": m.name,
@@ -155,6 +160,8 @@ class Mechanism:
             "task": list(task),
             "home": None if m.home is None else m.home.tolist(),
             "dof": m.dof,
+            "limits": {k: [None if not np.isfinite(v) else v for v in lim]
+                       for k, lim in m.limits.items()},
         }
         m._finish()
         return m
@@ -205,6 +212,7 @@ class Mechanism:
         m.dof = dof
         m.planar = dim == 2
         m.redundant = bool(redundant)
+        m.limits = {}
         m.table = None
         m.end_effector = None
         m.task = coords
@@ -243,6 +251,40 @@ class Mechanism:
         if h.shape != (len(self.joint_names),):
             raise MechanismError(f"home: expected {len(self.joint_names)} joint values")
         return h
+
+    def _check_limits(self, limits: Any) -> dict[str, tuple[float, float]]:
+        if not limits:
+            return {}
+        if not isinstance(limits, Mapping):
+            raise MechanismError("limits: expected a mapping joint name -> (lower, upper)")
+        out: dict[str, tuple[float, float]] = {}
+        for name, lim in limits.items():
+            if name not in self.joint_names:
+                raise MechanismError(
+                    f"limits.{name}: unknown joint; joints are {list(self.joint_names)}"
+                )
+            try:
+                lo, hi = lim
+                lo = -np.inf if lo is None else float(lo)
+                hi = np.inf if hi is None else float(hi)
+            except (TypeError, ValueError):
+                raise MechanismError(
+                    f"limits.{name}: expected (lower, upper) numbers or None, got {lim!r}"
+                ) from None
+            if np.isnan(lo) or np.isnan(hi) or not lo < hi:
+                raise MechanismError(f"limits.{name}: need lower < upper, got ({lo}, {hi})")
+            out[name] = (lo, hi)
+        return out
+
+    def within_limits(self, q: Any, tol: float = 1e-9) -> bool:
+        """Whether the joint values ``q`` (in ``joint_names`` order) respect :attr:`limits`."""
+        limits = getattr(self, "limits", None) or {}
+        for i, n in enumerate(self.joint_names):
+            if n in limits:
+                lo, hi = limits[n]
+                if not (lo - tol <= q[i] <= hi + tol):
+                    return False
+        return True
 
     def _finish(self) -> None:
         blob = json.dumps(_jsonable(self._spec), sort_keys=True).encode()
@@ -305,14 +347,15 @@ class Mechanism:
             return (
                 _rebuild_khalil,
                 (spec["rows"], spec["loops"], spec["params"], spec["end_effector"], spec["name"],
-                 spec["task"], None if self.home is None else self.home.tolist(), self.dof),
+                 spec["task"], None if self.home is None else self.home.tolist(), self.dof,
+                 spec.get("limits")),
             )
         return (_rebuild_legs, (spec["legs"], spec["platform"], spec["name"], spec["home"],
                                 spec.get("redundant", False)))
 
 
-def _rebuild_khalil(rows, loops, params, ee, name, task, home, dof):
-    return Mechanism.from_khalil(rows, loops, params, ee, name, task, home, dof)
+def _rebuild_khalil(rows, loops, params, ee, name, task, home, dof, limits=None):
+    return Mechanism.from_khalil(rows, loops, params, ee, name, task, home, dof, limits)
 
 
 def _rebuild_legs(legs, platform, name, home, redundant=False):

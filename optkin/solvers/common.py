@@ -186,6 +186,10 @@ def make_result(
     else:
         q = np.full(len(mech.joint_names), np.nan)
         pose = np.full((4, 4), np.nan)
+    if success and mech.limits and not mech.within_limits(q):
+        message += "; outside the joint limits: " + ", ".join(
+            n for n, v in zip(mech.joint_names, q)
+            if n in mech.limits and not mech.limits[n][0] <= v <= mech.limits[n][1])
     ip, ic = _masks(model)
     stats.nit = nit
     return KinResult(

@@ -248,6 +248,7 @@ def _inverse_khalil(model: Model, T: np.ndarray, opts: dict[str, Any]) -> Soluti
         Q, idx = np.zeros((nq, 0)), []
     act = np.array(mech.actuated)
     out: list[KinResult] = []
+    outside = 0
     for j in idx:
         q = Q[:, j]
         qa = q[act]
@@ -259,8 +260,13 @@ def _inverse_khalil(model: Model, T: np.ndarray, opts: dict[str, Any]) -> Soluti
         task_err = float(np.max(np.abs(np.array(sysf["task"](kr.q, T)).ravel())))
         if not kr.success or task_err > 1e-8:
             continue
+        if not mech.within_limits(kr.q):
+            outside += 1
+            continue
         out.append(kr)
     method = "direct path then loops (7.6)" if "stage1" in sysf else "all joints"
     info = {"success": bool(out), "starts": runs, "converged": converged, "method": method,
-            "message": f"{len(out)} postures from {runs} starts ({converged} converged; {method})"}
+            "outside_limits": outside,
+            "message": f"{len(out)} postures from {runs} starts ({converged} converged; {method})"
+            + (f"; {outside} outside the joint limits left out" if outside else "")}
     return SolutionSet(out, "postures", info, seed=seed)
