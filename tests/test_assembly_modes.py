@@ -490,6 +490,19 @@ def test_budget_and_time_limit_stop():
     assert quick.info["stop_reason"] == "time_limit"
 
 
+def test_ipopt_rescues_stalled_starts():
+    """With tiny clamped steps and 3 iterations no start converges by Newton; IPOPT from the
+    best stalled points finds both modes (checked against the circle intersection)."""
+    L = (2.0, 1.5, 2.0, 2.0, 1.5)
+    m = optkin.mechanisms.five_bar(*L)
+    modes = optkin.assembly_modes(m, [1.2, 1.9], max_iter=3, step_max=0.05, starts=64,
+                                  bound=None)
+    ref, _, _ = five_bar_reference(L, 1.2, 1.9)
+    assert modes.info["rescued"] == 2 and len(modes) == 2
+    for p in ref:
+        assert min(np.max(np.abs(r.x - p)) for r in modes) < 1e-9
+
+
 def test_unreachable_lengths_give_an_empty_set():
     m = optkin.mechanisms.five_bar(4.0, 1.0, 1.0, 1.0, 1.0)
     modes = optkin.assembly_modes(m, [np.pi, 0.0])

@@ -633,7 +633,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     if stop != "bound" and n_rescue > 0 and stalled_x:
         order = np.argsort(stalled_r)
         cand = np.array(stalled_x)[order].T
-        cand = cand[:, np.array(stalled_r)[order] < 1e-2 * max(1.0, model.length)]
+        cand = cand[:, np.array(stalled_r)[order] < 0.1 * max(1.0, model.length)]
         tried = 0
         solver = model.nlp() if cand.shape[1] else None
         for j in range(cand.shape[1]):
