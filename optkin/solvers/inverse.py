@@ -174,12 +174,20 @@ def _inverse_system(model: Model) -> dict[str, Any]:
     return out
 
 
+_MAPS: dict[tuple[str, int], tuple[ca.Function, ca.Function]] = {}
+
+
 def _multistart(step, params: np.ndarray, lo, hi, n: int, iters: int, seed: int):
     """Batched Newton from n Sobol starts in the box [lo, hi]; returns (Z, residuals)."""
     dim = len(lo)
     U = qmc.Sobol(dim, scramble=True, seed=seed).random(n)
     Z = (lo + U * (hi - lo)).T
-    fmap = step.map(n, "thread", 2)
+    key = (step.name(), n)
+    fmap = _MAPS.get(key)
+    if fmap is None or fmap[0] is not step:
+        fmap = (step, step.map(n, "thread", 2))
+        _MAPS[key] = fmap
+    fmap = fmap[1]
     P = np.tile(params, (1, n))
     for _ in range(iters):
         Zn, _ = fmap(Z, P)
