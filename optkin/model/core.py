@@ -9,6 +9,7 @@ the end-effector pose, and lazily the IPOPT solver of the direct geometric model
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Sequence
@@ -19,7 +20,7 @@ import numpy as np
 
 from ..errors import MechanismError
 from ..mechanism import Mechanism
-from ..mechanism.geometry import homogeneous, matrix_to_quat, rot2, wrap_angle
+from ..mechanism.geometry import homogeneous, matrix_to_quat, rot2
 from ..mechanism.legs import leg_forward, leg_joints
 from . import compiled as cc
 from . import fused
@@ -240,10 +241,14 @@ class Model:
     def canonical_x(self, x: np.ndarray) -> np.ndarray:
         """Angles wrapped to (-pi, pi], quaternions normalised with w >= 0."""
         x = np.array(x, dtype=float)
-        if self.x_angle.any():
-            x[self.x_angle] = wrap_angle(x[self.x_angle])
+        idx = self.__dict__.get("_angle_idx")
+        if idx is None:
+            idx = self._angle_idx = [int(i) for i in np.flatnonzero(self.x_angle)]
+        for i in idx:  # scalar wrap_angle: a few angles, no array overhead
+            a = math.remainder(x[i], 2 * math.pi) if math.isfinite(x[i]) else x[i]
+            x[i] = math.pi if a <= -math.pi else a
         if self.mech.kind == "legs" and self.mech.platform == "spatial":
-            qq = x[3:7] / np.linalg.norm(x[3:7])
+            qq = x[3:7] / math.sqrt(float(x[3:7] @ x[3:7]))
             x[3:7] = qq if qq[0] >= 0 else -qq
         return x
 
