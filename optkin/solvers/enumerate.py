@@ -533,6 +533,9 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     excluded = 0
     excl_res = 1e-5 * max(1.0, model.length)
     excl_dist = 1e-3
+    # a start still far from closing after half its iterations is given up (it would most
+    # likely wander until max_iter): Newton converges in a few steps once |Phi| is small
+    stall_iter, stall_res = max_iter // 2, 1e-3 * max(1.0, model.length)
     stalled_x: list[np.ndarray] = []
     stalled_r: list[float] = []
     big = 1e3 * model.x_scale[:, None]
@@ -562,7 +565,8 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             excluded += int(inside.sum())
         else:
             excluded_now = None
-        bad = live & ~conv & (~finite | np.any(np.abs(Xn) > big, axis=0) | (it >= max_iter))
+        bad = live & ~conv & (~finite | np.any(np.abs(Xn) > big, axis=0) | (it >= max_iter)
+                              | ((it >= stall_iter) & (r > stall_res)))
         if conv.any():
             idx = np.flatnonzero(conv)
             C = _canon(model, Xn[:, idx])
