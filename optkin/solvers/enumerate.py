@@ -1,23 +1,36 @@
 """Every assembly mode: multi-start enumeration with a measured completeness; path tracking.
 
 :func:`assembly_modes` solves the direct geometric model Phi(q_a, x) = 0 ([7.9] of seed 000)
-from many starting points at once. The starts are low-discrepancy (scrambled Sobol) points
+from many starting points at once. The starts are low-discrepancy (Sobol) points
 over the unknowns: joint angles over [-pi, pi) for Khalil mechanisms, SO(2) angles or
 uniform unit quaternions (Shoemake's map of Sobol points) for platforms, positions in the
-box where every leg can still close. For platforms whose legs are all distance constraints
-(every leg type here: a prismatic leg is a distance to its base joint, an RRR or RUS leg a
-distance to its elbow, fixed once q_a is known) and enough legs, the position is not sampled:
-differences of the squared leg equations are linear in the position (the elimination of
-Modern Robotics 7.1.1), so each sampled orientation gets the least-squares position.
+box where every leg can still close (every leg type here is a distance constraint: a
+prismatic leg to its base joint, an RRR or RUS leg to its elbow, fixed once q_a is known, so
+the platform point lies in a ball). For spatial platforms on six legs the position is not
+sampled: differences of the squared leg equations are linear in the position (the
+elimination of Modern Robotics 7.1.1 and 7.1.2), so each sampled orientation gets its
+least-squares position (measured: it converges in fewer iterations; for planar platforms box
+starts reach rare modes far more often, so they keep them). The Sobol points are randomised
+by a shift drawn from ``seed`` (Cranley-Patterson rotation).
 
 The starts run through Khalil's iteration (Newton with the step clamped to a threshold S,
-[7.55]) compiled into one CasADi Function mapped over a pool of columns (C code via the JIT
-for large models). Converged columns are deduplicated as they arrive (angles modulo 2 pi,
-quaternion sign, a tolerance relative to the mechanism size) and replaced by fresh starts.
+[7.55]) compiled into one CasADi Function mapped over a pool of columns (C code through
+:mod:`optkin.model.compiled`, cached on disk, for 6+ unknowns). Converged columns are
+deduplicated as they arrive (angles modulo 2 pi, quaternion sign, a tolerance relative to
+the mechanism size) and replaced by fresh starts. Exclusion rather than deflation: a start
+that enters the quadratic-convergence region of a known solution (|Phi| < 1e-5 L, within
+1e-3 scaled) is counted as its hit and replaced, which saves iterations without biasing the
+hit counts (deflating known solutions would change the basins and with them the meaning of
+the Good-Turing estimate).
+
 The solution set reports how many starts ran, how many converged, how often each solution was
 hit, and the Good-Turing estimate of the probability that a further start would find a new
 solution (the share of starts whose solution was seen exactly once). Enumeration stops when
-that estimate reaches the target, when the number of solutions reaches a known upper bound
+that estimate reaches the target (after at least ``min_starts``: with no singletons the
+estimate is 0 however few starts ran, so a floor on the sample is needed; the defaults, 256
+starts for small systems and 2048 for 6+ unknowns, were set so that modes hit by 0.3 % of
+the starts, as the rarest of Dietmaier's platform are, are found), when the number of
+solutions reaches a known upper bound
 for the mechanism class (6 for a planar platform with three distance legs, 40 for a 6-6
 platform, 2 for a five-bar or a Delta: the set is then provably complete), or at the start
 budget or time limit. IPOPT ([7.9] as an NLP) only rescues starts that stalled.
