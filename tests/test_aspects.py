@@ -203,3 +203,47 @@ def test_errors(five_bar):
         aspects(m)
     with pytest.raises(optkin.MechanismError, match="actuated joint"):
         workspace(five_bar, limits={"x": (0, 1)})
+
+
+def test_rpr3_section_aspects_against_grid():
+    """A 3-RPR at constant orientation phi = 0.5 with leg strokes [10, 30]: one working mode
+    (B = -I), aspects = components of the stroke-limited workspace split by det A = 0,
+    against a grid with the leg lengths and det A written by hand; workspace area likewise."""
+    base = np.array([[0.0, 0.0], [15.91, 0.0], [0.0, 10.0]])
+    d1, d2, d3 = 17.04, 16.54, 20.84
+    al = np.arccos((d1**2 + d3**2 - d2**2) / (2 * d1 * d3))
+    plat = np.array([[0.0, 0.0], [d1, 0.0], [d3 * np.cos(al), d3 * np.sin(al)]])
+    m = optkin.mechanisms.rpr3(base, plat)
+    lim = {f"L{i}.rho": (10.0, 30.0) for i in (1, 2, 3)}
+    a = aspects(m, fixed={"phi": 0.5}, limits=lim)
+    ws = workspace(m, fixed={"phi": 0.5}, limits=lim)
+    assert a.success and ws.success
+    assert a.working_modes == [(-1, -1, -1)]
+    b = a.curves.bounds
+    n = 700
+    xs, ys = np.linspace(*b[0], n), np.linspace(*b[1], n)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    c, s = np.cos(0.5), np.sin(0.5)
+    ok = np.ones(X.shape, dtype=bool)
+    rows = []
+    for A, bb in zip(base, plat):
+        Rb = np.array([c * bb[0] - s * bb[1], s * bb[0] + c * bb[1]])
+        dx, dy = X + Rb[0] - A[0], Y + Rb[1] - A[1]
+        rho = np.hypot(dx, dy)
+        ok &= (rho >= 10) & (rho <= 30)
+        rows.append(np.stack([dx, dy, Rb[0] * dy - Rb[1] * dx], -1))
+    det = np.linalg.det(np.stack(rows, -2))
+    cell = (xs[1] - xs[0]) * (ys[1] - ys[0])
+    assert abs(ws.area - ok.sum() * cell) < 0.01 * ws.area
+    comps = []
+    for sgn in (1, -1):
+        lab, k = ndimage.label(ok & (np.sign(det) == sgn))
+        sizes = ndimage.sum_labels(np.ones_like(lab), lab, np.arange(1, k + 1))
+        comps += [(sgn, sz * cell, lab == q) for q, sz in enumerate(sizes, start=1) if sz > 30]
+    assert len(a.aspects) == len(comps)
+    for asp_ in a.aspects:
+        i = int(round((asp_.x[0] - xs[0]) / (xs[1] - xs[0])))
+        j = int(round((asp_.x[1] - ys[0]) / (ys[1] - ys[0])))
+        hit = [cp for cp in comps if cp[2][i, j]]
+        assert len(hit) == 1 and hit[0][0] == asp_.det_sign
+        assert abs(hit[0][1] - asp_.area) < 0.02 * asp_.area

@@ -989,7 +989,9 @@ def singular_curves(
         if k == "serial":
             if mech.kind != "legs":
                 raise MechanismError("kind='serial': serial curves (B_jj = 0) need a leg mechanism")
-            conds += [(f"serial:{j}", 0.0) for j in range(na) if j not in fixed_idx]
+            # RPR legs have B_jj = -1: no serial singularity (their stroke ends are limits)
+            conds += [(f"serial:{j}", 0.0) for j in range(na)
+                      if j not in fixed_idx and mech.legs[j].type == "RRR"]
         elif k == "limit":
             for i, key in zip(lim_idx, limits):
                 if i >= na:
