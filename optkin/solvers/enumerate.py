@@ -546,6 +546,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     excluded = 0
     excl_res = 1e-5 * max(1.0, model.length)
     excl_dist = 1e-3
+    radius = np.zeros(0)
     # a start still far from closing after half its iterations is given up (it would most
     # likely wander until max_iter): Newton converges in a few steps once |Phi| is small
     stall_iter, stall_res = max_iter // 2, 1e-3 * max(1.0, model.length)
@@ -568,7 +569,11 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             jn = np.flatnonzero(near)
             Dn = _scaled_dist(model, _canon(model, Xn[:, jn]), sols)
             kn = np.argmin(Dn, axis=1)
-            inside = Dn[np.arange(jn.size), kn] < excl_dist
+            if radius.size != sols.shape[1]:  # per solution: 1e-3, or a quarter of the
+                Ds = _scaled_dist(model, sols, sols)  # distance to its nearest neighbour
+                np.fill_diagonal(Ds, np.inf)
+                radius = np.minimum(excl_dist, 0.25 * Ds.min(axis=1))
+            inside = Dn[np.arange(jn.size), kn] < radius[kn]
             for k in kn[inside]:
                 hits[k] += 1
                 n_once -= hits[k] == 2
