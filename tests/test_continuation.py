@@ -409,3 +409,21 @@ def test_errors(five_bar):
     m = optkin.mechanisms.rpr3(BASE3, PLAT3)
     with pytest.raises(optkin.MechanismError, match="fix"):
         singular_curves(m, plane="workspace")
+
+
+def test_four_bar_turning_points():
+    """A double rocker (crank 3, coupler 1, rocker 2, ground 3; Grashof with the coupler
+    shortest): the input angle turns back where det W_p = 0, i.e. where coupler and
+    rocker are aligned, |B - D| = L3 +- L2 (B the crank tip, D the rocker pivot)."""
+    m = optkin.mechanisms.four_bar(3.0, 1.0, 2.0, 3.0)
+    r = singular_curves(m, plane=("theta", "phi"))
+    assert r.success and r.max_residual < 1e-9
+    act = r.info["actuator_singularities"]
+    assert len(act) == 4
+    i0, _ = r.info["plane_index"]
+    B = 3.0 * u2(act[:, i0])
+    dist = np.linalg.norm(B - np.array([3.0, 0.0]), axis=1)
+    assert np.all(np.min(np.abs(dist[:, None] - np.array([1.0, 3.0])), axis=1) < 1e-8)
+    # and a crank-rocker (crank shortest) has none
+    r2 = singular_curves(optkin.mechanisms.four_bar(1.0, 3.0, 2.0, 3.0), plane=("theta", "phi"))
+    assert len(r2.info["actuator_singularities"]) == 0

@@ -613,6 +613,10 @@ def _plot_curves(res: SingularCurves, path=None, ax=None, title=None):
         i0, i1 = res.info["plane_index"]
         ax.plot(res.branch_points[:, i0], res.branch_points[:, i1], "ko", ms=4,
                 label="branch points")
+    act = res.info.get("actuator_singularities")
+    if act is not None and len(act):
+        i0, i1 = res.info["plane_index"]
+        ax.plot(act[:, i0], act[:, i1], "gs", ms=5, mfc="none", label="det W_p = 0")
     if len(res.cusps):
         i0, i1 = res.info["plane_index"]
         ax.plot(res.cusps[:, i0], res.cusps[:, i1], "m^", ms=6, label="cusps")

@@ -288,6 +288,9 @@ class SingularCurves:
             "branch_points_plane": self.branch_points[:, list(self.info["plane_index"])].tolist(),
             "n_cusps": int(len(self.cusps)), "cusps": self.cusps.tolist(),
             "cusps_plane": self.cusps[:, list(self.info["plane_index"])].tolist(),
+            "actuator_singularities_plane": np.asarray(
+                self.info.get("actuator_singularities", np.zeros((0, len(self.names)))))[
+                :, list(self.info["plane_index"])].tolist(),
             "time": self.time, "n_seeds": self.n_seeds,
             "curves": [c.to_dict() for c in self.curves],
         }
@@ -1078,6 +1081,13 @@ def singular_curves(
                 found += _cusps_on(tr, c, pidx, fixed_idx, fixed_map)
         if found:
             cusp_pts = np.array(found)
+    # actuator (input) singularities along a 1-DoF C-space: det W_p changes sign
+    act_pts = []
+    for c in curves:
+        if c.kind == "closure" and c.det_Wp is not None:
+            sys = augmented_system(mech, "closure", fixed_idx)
+            tr = _Tracer(sys, pvals, 0.0, pidx, bounds_arr, hmax, tol, max_steps)
+            act_pts += _det_zeros_on(tr, c, fixed_idx, fixed_map)
     maxres = max((float(np.max(c.residual)) for c in curves), default=0.0)
     ok = bool(curves) and maxres < 1e-9
     status = "ok" if ok else ("no_curves" if not curves else "inaccurate")
@@ -1093,8 +1103,49 @@ def singular_curves(
         branch_points=np.array(bps).reshape(-1, len(names)),
         cusps=cusp_pts, success=ok, status=status, message=msg, bounds=bounds_arr,
         periodic=per_plane, n_seeds=n_seeds, time=time.perf_counter() - t0,
-        info={"plane_index": pidx, "conditions": [c for c, _ in conds]},
+        info={"plane_index": pidx, "conditions": [c for c, _ in conds],
+              "actuator_singularities": np.array(act_pts).reshape(-1, len(names))},
     )
+
+
+def _det_zeros_on(tr: _Tracer, c: Curve, fixed_idx, fixed_map) -> list[np.ndarray]:
+    """Points of a traced curve where det W_p vanishes (bisection between sign changes)."""
+    free = np.array(tr.sys.free_idx)
+    U = c.v[:, free] / tr.scl
+    d = c.det_Wp
+    n = len(U)
+    pairs = [(i, i + 1) for i in range(n - 1)] + ([(n - 1, 0)] if c.closed else [])
+    out = []
+
+    def full(u):
+        v = np.empty(tr.sys.nv)
+        v[free] = u * tr.scl
+        for k in fixed_idx:
+            v[k] = fixed_map[k]
+        return v
+
+    for i, j in pairs:
+        if d[i] * d[j] >= 0:
+            continue
+        ua, step = U[i], tr.diff(U[j], U[i])
+        dn = step / np.linalg.norm(step)
+        lo, hi, best = 0.0, 1.0, None
+        for _ in range(50):
+            sm = 0.5 * (lo + hi)
+            um, _ = tr.correct(ua + sm * step, dn)
+            if um is None:
+                break
+            best = um
+            dm = float(np.array(tr.sys.aux(full(um))[0]).ravel()[0])
+            if dm * d[i] > 0:
+                lo = sm
+            else:
+                hi = sm
+            if (hi - lo) * np.linalg.norm(step) < 1e-12:
+                break
+        if best is not None:
+            out.append(full(best))
+    return out
 
 
 def _cusps_on(tr: _Tracer, c: Curve, pidx, fixed_idx, fixed_map) -> list[np.ndarray]:
