@@ -9,6 +9,7 @@ comparable across machines. ``extra_info`` also holds the status and the iterati
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -100,6 +101,7 @@ def record(benchmark, baseline_s: float | None, baseline: str, **info: Any) -> N
     benchmark.extra_info.update({k: (v.item() if isinstance(v, np.generic) else v)
                                  for k, v in info.items()})
     benchmark.extra_info["optkin_median_s"] = med
+    benchmark.extra_info["load_average_1min"] = round(os.getloadavg()[0], 2)
     if baseline_s is not None:
         benchmark.extra_info["baseline"] = baseline
         benchmark.extra_info["baseline_median_s"] = baseline_s
