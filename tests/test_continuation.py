@@ -427,3 +427,28 @@ def test_four_bar_turning_points():
     # and a crank-rocker (crank shortest) has none
     r2 = singular_curves(optkin.mechanisms.four_bar(1.0, 3.0, 2.0, 3.0), plane=("theta", "phi"))
     assert len(r2.info["actuator_singularities"]) == 0
+
+
+def test_five_bar_as_khalil_table():
+    """The same five-bar written as a Khalil table (one loop cut at P, passive t2, t4, t3):
+    its internal singularities det W_p = 0, traced in (t1, t5), satisfy |C - D| = L2 + L3 by
+    hand (the coupler circle C = D projects to points and is not a curve of this plane)."""
+    rows = [dict(a=0, mu=1, sigma=0, d=0, theta="t1"), dict(a=1, mu=0, sigma=0, d=L1, theta="t2"),
+            dict(a=0, mu=1, sigma=0, d=L0, theta="t5"), dict(a=3, mu=0, sigma=0, d=L4, theta="t4"),
+            dict(a=2, mu=0, sigma=0, d=L2, theta="t3"), dict(a=4, mu=0, sigma=2, d=L3, theta=0)]
+    m = optkin.Mechanism.from_khalil(rows, loops=1, name="five-bar (Khalil)")
+    r = singular_curves(m, plane="joint")
+    assert r.success and r.max_residual < 1e-9
+    V = np.vstack([c.v for c in r.curves])
+    C, D = L1 * u2(V[:, 0]), BASE_B + L4 * u2(V[:, 1])
+    assert np.max(np.abs(np.linalg.norm(C - D, axis=1) - (L2 + L3))) < 1e-8
+    # it covers the closed curve |C - D| = 10 of the torus: grid crossings are near it
+    n = 200
+    th = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    T1, T2 = np.meshgrid(th, th, indexing="ij")
+    G = np.linalg.norm(L1 * u2(T1) - BASE_B - L4 * u2(T2), axis=-1) - (L2 + L3)
+    Q = np.stack([T1, T2], -1)
+    hit = G * np.roll(G, -1, 0) < 0
+    s = (G[hit] / (G[hit] - np.roll(G, -1, 0)[hit]))[:, None]
+    cr = Q[hit] + s * wrap(np.roll(Q, -1, 0)[hit] - Q[hit])
+    assert dist_to_curves(cr, r.curves, periodic=True).max() < 2 * np.pi / n * 1.5

@@ -844,22 +844,41 @@ def _sign_change_seeds(sys: _System, V: np.ndarray, ok: np.ndarray, shape: tuple
 
 
 def _seeds_khalil(sys: _System, fixed: dict[int, float], n: int, rng: np.random.Generator) -> list[np.ndarray]:
-    """C-space seeds of a 1-DoF chain: a grid over q_a, multi-start Newton on the passives."""
+    """C-space seeds of a chain with one free actuated joint: a grid over it, multi-start
+    Newton (the model's damped step) on the unknowns x."""
     model = sys.model
-    if sys.na != 1 or fixed:
+    na = sys.na
+    free_qa = [i for i in range(na) if i not in fixed]
+    if len(free_qa) != 1 or any(i >= na for i in fixed):
         return []
     seeds = []
     starts = rng.uniform(-np.pi, np.pi, (6, model.nx)) * model.x_scale
-    for qa in np.linspace(-np.pi, np.pi, n, endpoint=False):
+    qa = np.zeros(na)
+    for i, v in fixed.items():
+        qa[i] = v
+    for val in np.linspace(-np.pi, np.pi, n, endpoint=False):
+        qa[free_qa[0]] = val
         for x0 in starts:
             x = x0.copy()
             for _ in range(40):
-                xn, r = model.step(np.array([qa]), x)
+                xn, r = model.step(qa, x)
                 x = np.array(xn).ravel()
                 if float(r) < 1e-10:
                     break
-            if np.max(np.abs(model.residual(np.array([qa]), x))) < 1e-8:
-                seeds.append(np.concatenate([[qa], x]))
+            if np.max(np.abs(model.residual(qa, x))) < 1e-8:
+                seeds.append(np.concatenate([qa, x]))
+    return seeds
+
+
+def _seeds_khalil_parallel(mech: Mechanism, names, n_lines: int, n: int, hmax: float) -> list[np.ndarray]:
+    """Seeds of det W_p = 0 for a 2-DoF chain: along the 1-DoF sections q_a,0 = c (C-space
+    curves traced by continuation), the points where det W_p changes sign."""
+    seeds: list[np.ndarray] = []
+    na = get_model(mech).na
+    for c in np.linspace(-np.pi, np.pi, n_lines, endpoint=False):
+        sub = singular_curves(mech, plane=(names[1], names[na]), kind="closure",
+                              fixed={names[0]: float(c)}, grid=6, step=hmax, cusps=False)
+        seeds += list(sub.info["actuator_singularities"])
     return seeds
 
 
@@ -1041,6 +1060,12 @@ def singular_curves(
         sys = augmented_system(mech, cond, fixed_idx)
         if mech.kind == "legs":
             seeds_v = _seeds_legs(sys, cond, fixed_map, lim, n, bounds_full)
+        elif cond == "parallel":
+            if model.na != 2 or fixed_map:
+                raise MechanismError(
+                    f"{mech.name}: parallel curves of a Khalil mechanism need 2 actuated "
+                    "joints and no section (fixed); 1-DoF chains: kind='closure'")
+            seeds_v = _seeds_khalil_parallel(mech, names, max(8, n // 2), n, hmax)
         else:
             seeds_v = _seeds_khalil(sys, fixed_map, n, rng)
         tr = _Tracer(sys, pvals, lim, pidx, bounds_arr, hmax, tol, max_steps)
