@@ -298,3 +298,12 @@ def test_concurrent_compilation(tmp_path):
         assert out.split() == ["True", "True"]
     assert len(list(tmp_path.glob("*.so"))) == 1
     assert not list(tmp_path.glob(".build-*"))
+
+
+def test_forward_batch_docstring_example():
+    import doctest
+
+    import optkin.solvers.batch as batch
+
+    res = doctest.testmod(batch, optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert res.attempted > 0 and res.failed == 0
