@@ -247,3 +247,37 @@ def test_rpr3_section_aspects_against_grid():
         hit = [cp for cp in comps if cp[2][i, j]]
         assert len(hit) == 1 and hit[0][0] == asp_.det_sign
         assert abs(hit[0][1] - asp_.area) < 0.02 * asp_.area
+
+
+def _grid_aspect_counts(L0_, L1_, L2_, L3_, L4_, bounds, n=500):
+    """Aspects per working mode by grid components (hand-written IK and det A)."""
+    xs, ys = np.linspace(*bounds[0], n), np.linspace(*bounds[1], n)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    r1, r2 = np.hypot(X, Y), np.hypot(X - L0_, Y)
+    c1 = (r1**2 + L1_**2 - L2_**2) / (2 * r1 * L1_)
+    c2 = (r2**2 + L4_**2 - L3_**2) / (2 * r2 * L4_)
+    ok = (np.abs(c1) <= 1) & (np.abs(c2) <= 1)
+    out = {}
+    for s1 in (1, -1):
+        for s2 in (1, -1):
+            t1 = np.arctan2(Y, X) + s1 * np.arccos(np.clip(c1, -1, 1))
+            t2 = np.arctan2(Y, X - L0_) + s2 * np.arccos(np.clip(c2, -1, 1))
+            Cx, Cy = L1_ * np.cos(t1), L1_ * np.sin(t1)
+            Dx, Dy = L0_ + L4_ * np.cos(t2), L4_ * np.sin(t2)
+            det = (X - Cx) * (Y - Dy) - (Y - Cy) * (X - Dx)
+            m1 = -np.sign(Cx * (Y - Cy) - Cy * (X - Cx))
+            m2 = -np.sign((Dx - L0_) * (Y - Dy) - Dy * (X - Dx))
+            k = 0
+            for sg in (1, -1):
+                lab, nl = ndimage.label(ok & (np.sign(det) == sg))
+                sz = ndimage.sum_labels(np.ones_like(lab), lab, np.arange(1, nl + 1))
+                k += int(np.sum(sz > 30))
+            out[(int(m1[ok][0]), int(m2[ok][0]))] = k
+    return out
+
+
+@pytest.mark.parametrize("dims", [(9, 8, 5, 4, 7), (10, 6, 7, 5, 6), (4, 5, 5, 5, 5)])
+def test_other_five_bars_against_grid(dims):
+    a = aspects(optkin.mechanisms.five_bar(*dims))
+    assert a.success, a.message
+    assert a.counts == _grid_aspect_counts(*dims, a.curves.bounds)
