@@ -28,16 +28,19 @@ def main(path: str) -> None:
           f"{data.get('datetime', '')[:16]}\n")
     print("| benchmark | optkin median | baseline | baseline median | ratio | status | nit | notes |")
     print("|---|---|---|---|---|---|---|---|")
-    skip = {"optkin_median_s", "baseline", "baseline_median_s", "ratio", "status", "nit",
-            "mechanism"}
+    keep = ("solver", "per_solve_us", "fsolve_per_solve_us", "per_solve_threads2_chunk1024_us",
+            "max_residual", "fallback", "postures", "modes", "naive_modes", "types", "curves",
+            "aspects", "nlp_build_s", "warm_solve_s", "compile_core_and_tracker_s",
+            "compiler_cpu_s", "cached_build_fresh_process_s", "agrees_with_fd",
+            "agrees_with_fsolve", "meets_target", "load_average_1min")
     for b in data["benchmarks"]:
         e = b.get("extra_info", {})
         notes = ", ".join(
-            f"{k}={fmt(v) if k.endswith('_s') else (f'{v:.3g}' if isinstance(v, float) else v)}"
-            for k, v in e.items() if k not in skip
+            f"{k}={fmt(e[k]) if k.endswith('_s') else (f'{e[k]:.3g}' if isinstance(e[k], float) else e[k])}"
+            for k in keep if k in e and e[k] is not None
         )
         ratio = e.get("ratio")
-        print(f"| {b['name']} | {fmt(b['stats']['median'])} | {e.get('baseline', '-')} | "
+        print(f"| {b['name'].removeprefix('test_')} | {fmt(b['stats']['median'])} | {e.get('baseline', '-')} | "
               f"{fmt(e.get('baseline_median_s'))} | "
               f"{'-' if ratio is None else f'{ratio:.1f}x'} | {e.get('status', '-')} | "
               f"{e.get('nit', '-')} | {notes} |")
