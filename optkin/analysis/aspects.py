@@ -610,16 +610,15 @@ def _plot_curves(res: SingularCurves, path=None, ax=None, title=None):
                                 res.periodic):
             ax.plot(P[:, 0], P[:, 1], color=col, lw=1.0)
     if len(res.branch_points):
-        i0, i1 = res.info["plane_index"]
-        ax.plot(res.branch_points[:, i0], res.branch_points[:, i1], "ko", ms=4,
-                label="branch points")
+        B = res.plane_points(res.branch_points)
+        ax.plot(B[:, 0], B[:, 1], "ko", ms=4, label="branch points")
     act = res.info.get("actuator_singularities")
     if act is not None and len(act):
-        i0, i1 = res.info["plane_index"]
-        ax.plot(act[:, i0], act[:, i1], "gs", ms=5, mfc="none", label="det W_p = 0")
+        B = res.plane_points(act)
+        ax.plot(B[:, 0], B[:, 1], "gs", ms=5, mfc="none", label="det W_p = 0")
     if len(res.cusps):
-        i0, i1 = res.info["plane_index"]
-        ax.plot(res.cusps[:, i0], res.cusps[:, i1], "m^", ms=6, label="cusps")
+        B = res.plane_points(res.cusps)
+        ax.plot(B[:, 0], B[:, 1], "m^", ms=6, label="cusps")
     ax.set_xlabel(res.plane[0])
     ax.set_ylabel(res.plane[1])
     kinds = sorted({c.kind.split(":")[0] for c in res.curves})

@@ -273,6 +273,14 @@ class SingularCurves:
             out += _split_wrapped(P, self.periodic)
         return out
 
+    def plane_points(self, V: np.ndarray) -> np.ndarray:
+        """Plane coordinates of full points V (n, nv), periodic ones wrapped to [-pi, pi)."""
+        P = np.asarray(V, dtype=float).reshape(-1, len(self.names))[:, list(self.info["plane_index"])]
+        for k in range(2):
+            if self.periodic[k]:
+                P[:, k] = _wrap(P[:, k])
+        return P
+
     def to_dict(self) -> dict[str, Any]:
         kinds: dict[str, int] = {}
         for c in self.curves:
@@ -285,12 +293,11 @@ class SingularCurves:
             "max_residual": self.max_residual,
             "n_branch_points": int(len(self.branch_points)),
             "branch_points": self.branch_points.tolist(),
-            "branch_points_plane": self.branch_points[:, list(self.info["plane_index"])].tolist(),
+            "branch_points_plane": self.plane_points(self.branch_points).tolist(),
             "n_cusps": int(len(self.cusps)), "cusps": self.cusps.tolist(),
-            "cusps_plane": self.cusps[:, list(self.info["plane_index"])].tolist(),
-            "actuator_singularities_plane": np.asarray(
-                self.info.get("actuator_singularities", np.zeros((0, len(self.names)))))[
-                :, list(self.info["plane_index"])].tolist(),
+            "cusps_plane": self.plane_points(self.cusps).tolist(),
+            "actuator_singularities_plane": self.plane_points(
+                self.info.get("actuator_singularities", np.zeros((0, len(self.names))))).tolist(),
             "time": self.time, "n_seeds": self.n_seeds,
             "curves": [c.to_dict() for c in self.curves],
         }
