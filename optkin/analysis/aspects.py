@@ -163,6 +163,9 @@ class Workspace:
     status: str
     message: str
     time: float = 0.0
+    qa_masks: dict[tuple[int, ...], np.ndarray] | None = None
+    qa_grid: tuple[np.ndarray, np.ndarray] | None = None
+    qa_names: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {"mechanism": self.mechanism, "success": self.success, "status": self.status,
@@ -510,6 +513,7 @@ def workspace(
     bounds: Any = None,
     grid: int | None = None,
     step: float | None = None,
+    qa_grid: int = 200,
 ) -> Workspace:
     """The reachable workspace in the plane, per working mode and in total.
 
@@ -521,8 +525,9 @@ def workspace(
     ----------
     mech : Mechanism
         As for :func:`aspects`.
-    fixed, limits, bounds, grid, step
-        As for :func:`aspects`.
+    fixed, limits, bounds, grid, step, qa_grid
+        As for :func:`aspects` (``qa_grid``: the joint-space images of the working modes,
+        two-leg point platforms).
 
     Returns
     -------
@@ -551,13 +556,44 @@ def workspace(
         regions[mode] = [f for f, _, _ in reg]
         areas[mode] = float(sum(f.area for f in regions[mode]))
     area, total = union_area([regions[m] for m in modes], 0.01 * model.length, snap)
+    qmasks, qgrid = None, None
+    if mech.platform == "planar_point" and len(mech.legs) == 2:
+        qmasks, qgrid = _mode_qa_masks(mech, regions, qa_grid, lim_map)
     ok = curves.success or not has_serial
     return Workspace(mechanism=mech.name, plane=curves.plane, working_modes=modes,
                      regions=regions, areas=areas, total=total, area=area, curves=curves,
                      success=bool(ok), status="ok" if ok else "inaccurate",
                      message=f"workspace area {area:.6g}; per mode "
                              f"{[round(areas[m], 6) for m in modes]}",
-                     time=time.perf_counter() - t0)
+                     time=time.perf_counter() - t0, qa_masks=qmasks, qa_grid=qgrid,
+                     qa_names=tuple(mech.active_names))
+
+
+def _mode_qa_masks(mech, regions, n, lim_map):
+    """The joint-space image of each working mode's region (closed-form direct kinematics
+    of a two-leg point platform), on an n x n grid of q_a."""
+    r0, r1 = _qa_range(mech, 0), _qa_range(mech, 1)
+    g0 = np.linspace(*r0, n, endpoint=False) + 0.5 * (r0[1] - r0[0]) / n
+    g1 = np.linspace(*r1, n, endpoint=False) + 0.5 * (r1[1] - r1[0]) / n
+    G0, G1 = np.meshgrid(g0, g1, indexing="ij")
+    Q = np.stack([G0.ravel(), G1.ravel()], 1)
+    inlim = np.ones(len(Q), dtype=bool)
+    for i, (lo, hi) in lim_map.items():
+        inlim &= (Q[:, i] >= lo) & (Q[:, i] <= hi)
+    sys = augmented_system(mech, "parallel", ())
+    masks = {m: np.zeros(len(Q), dtype=bool) for m in regions}
+    for P, ok in _fk_points(mech, Q):
+        idx = np.flatnonzero(ok & inlim)
+        if len(idx) == 0:
+            continue
+        _, B = sys.aux_many(np.hstack([Q[idx], P[idx]]).T)
+        S = np.sign(B.T).astype(int)
+        for m, faces_m in regions.items():
+            sel = np.all(S == np.array(m), axis=1)
+            for f in faces_m:
+                ins = f.contains(P[idx[sel]])
+                masks[m][idx[sel][ins]] = True
+    return {m: v.reshape(n, n) for m, v in masks.items()}, (g0, g1)
 
 
 # ---------------------------------------------------------------------------------------
@@ -571,7 +607,8 @@ def _fig(nr, nc, w=4.0, h=4.0):
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    fig, axs = plt.subplots(nr, nc, figsize=(w * nc, h * nr), squeeze=False)
+    fig, axs = plt.subplots(nr, nc, figsize=(w * nc, h * nr), squeeze=False,
+                            constrained_layout=True)
     return fig, axs
 
 
@@ -675,13 +712,24 @@ def _plot_workspace(res: Workspace, path=None, title=None):
     import matplotlib.pyplot as plt
 
     modes = res.working_modes
-    fig, axs = _fig(1, len(modes) + 1, 3.6, 3.6)
+    rows = 2 if res.qa_masks is not None else 1
+    fig, axs = _fig(rows, len(modes) + 1, 3.6, 3.6)
     cmap = plt.get_cmap("tab10")
     for j, mode in enumerate(modes):
         ax = axs[0, j]
         for f in res.regions[mode]:
             ax.add_patch(_face_patch(f, facecolor=cmap(j % 10), alpha=0.5, edgecolor="k", lw=0.6))
         ax.set_title(f"Mf {mode}: area {res.areas[mode]:.4g}", fontsize=8)
+        if rows == 2:
+            ax2 = axs[1, j]
+            g0, g1 = res.qa_grid
+            M = np.ma.masked_where(~res.qa_masks[mode].T, np.full(res.qa_masks[mode].T.shape, j))
+            ax2.pcolormesh(g0, g1, M, cmap=cmap, vmin=0, vmax=9.99, alpha=0.6, shading="nearest")
+            ax2.set_xlabel(res.qa_names[0])
+            ax2.set_ylabel(res.qa_names[1])
+            ax2.set_title(f"Mf {mode} in the joint space", fontsize=8)
+    if rows == 2:
+        axs[1, -1].axis("off")
     ax = axs[0, -1]
     for f in res.total:
         ax.add_patch(_face_patch(f, facecolor="0.6", alpha=0.6, edgecolor="k", lw=0.6))
