@@ -10,7 +10,10 @@ Two layouts of the work, both on compiled CasADi code when a C compiler is prese
   corrections (7.9), the last solution of a chunk seeding the next chunk. A point whose
   residual stays above ``tol`` is re-solved by :func:`optkin.forward` (damped Newton, then
   IPOPT) from the previous solution, and tracking resumes from it. The assembly mode is
-  the one of the first point, followed continuously.
+  the one of the first point, followed continuously; near a parallel singularity the
+  iteration may cross into another mode without a warning (no det W_p check here: use the
+  guarded path tracking of issue 4 for that). The first call compiles the model's
+  libraries (about 0.5-1.5 s, then cached on disk).
 * ``path=False``: the rows are independent; all start from ``guess`` (one guess, or one
   row of unknowns per solve) and the compiled damped Newton step, mapped over ``chunk``
   columns with threads (``Function.map(chunk, "thread", threads)``), iterates until each
