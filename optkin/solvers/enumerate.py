@@ -507,7 +507,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     if jit == "auto":
         jit = "cached" if small else True
     threads = 1 if small else int(opts["threads"])
-    unroll = 3 if small else 1  # Newton iterations per call: fewer Python round trips
+    unroll = 3 if small else 2  # Newton iterations per call: fewer Python round trips
     budget = int(opts["starts"])
     min_starts = (256 if small else 2048) if opts["min_starts"] == "auto" \
         else int(opts["min_starts"])
