@@ -482,6 +482,17 @@ def test_account_and_good_turing():
     assert d["count"] == len(modes) and d["seed"] == 1
 
 
+def test_odd_count_below_an_even_bound_runs_longer():
+    """Non-real solutions pair up, so with the bound 40 an odd count is incomplete: the
+    Good-Turing target may stop such a run only after 4 x min_starts."""
+    m = optkin.mechanisms.stewart_gough(DIET_A, DIET_B)
+    for seed in range(8):
+        modes = optkin.assembly_modes(m, DIET_L, seed=seed, min_starts=64, target=0.05)
+        assert modes.info["stop_reason"] in ("target", "bound")
+        if modes.info["stop_reason"] == "target":
+            assert modes.info["starts"] >= (256 if len(modes) % 2 else 64)
+
+
 def test_budget_and_time_limit_stop():
     m = optkin.mechanisms.stewart_gough(DIET_A, DIET_B)
     few = optkin.assembly_modes(m, DIET_L, starts=64, bound=None)

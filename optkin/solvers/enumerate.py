@@ -30,10 +30,12 @@ that estimate reaches the target (after at least ``min_starts``: with no singlet
 estimate is 0 however few starts ran, so a floor on the sample is needed; the defaults, 256
 starts for small systems and 2048 for 6+ unknowns, were set so that modes hit by 0.3 % of
 the starts, as the rarest of Dietmaier's platform are, are found), when the number of
-solutions reaches a known upper bound
-for the mechanism class (6 for a planar platform with three distance legs, 40 for a 6-6
-platform, 2 for a five-bar or a Delta: the set is then provably complete), or at the start
-budget or time limit. IPOPT ([7.9] as an NLP) only rescues starts that stalled.
+solutions reaches a known upper bound for the mechanism class (6 for a planar platform with
+three distance legs, 40 for a 6-6 platform, 2 for a five-bar or a Delta: the set is then
+provably complete), or at the start budget or time limit. Below such an even bound an odd
+count means a mode is still missing (non-real solutions come in conjugate pairs; only a
+double root at a singularity breaks this), so the target may stop the run only after four
+times ``min_starts``. IPOPT ([7.9] as an NLP) only rescues starts that stalled.
 
 :func:`track` follows one assembly mode along a path of actuated values (predictor-corrector
 continuation with step halving) and stops with status ``"singular"`` where det W_p changes
@@ -626,7 +628,11 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         # stopping rules
         if bound is not None and len(hits) >= bound:
             stop = "bound"
-        elif done >= min_starts and n_once <= target * done:
+        elif (done >= (min_starts if bound is None or (len(hits) - bound) % 2 == 0
+                       else 4 * min_starts) and n_once <= target * done):
+            # with a known bound (an even number of complex solutions), an odd count means a
+            # mode is still missing (non-real solutions come in conjugate pairs), unless a
+            # degenerate case has a double root: run four times longer before stopping
             stop = "target"
         elif timer() - t0 > time_limit:
             stop = "time_limit"
