@@ -281,3 +281,12 @@ def test_other_five_bars_against_grid(dims):
     a = aspects(optkin.mechanisms.five_bar(*dims))
     assert a.success, a.message
     assert a.counts == _grid_aspect_counts(*dims, a.curves.bounds)
+
+
+def test_docstring_examples():
+    import doctest
+    import importlib
+
+    mod = importlib.import_module("optkin.analysis.aspects")
+    failures, tried = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
+    assert tried > 0 and failures == 0

@@ -452,3 +452,12 @@ def test_five_bar_as_khalil_table():
     s = (G[hit] / (G[hit] - np.roll(G, -1, 0)[hit]))[:, None]
     cr = Q[hit] + s * wrap(np.roll(Q, -1, 0)[hit] - Q[hit])
     assert dist_to_curves(cr, r.curves, periodic=True).max() < 2 * np.pi / n * 1.5
+
+
+def test_docstring_examples():
+    import doctest
+    import importlib
+
+    mod = importlib.import_module("optkin.analysis.continuation")
+    failures, tried = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
+    assert tried > 0 and failures == 0

@@ -351,6 +351,15 @@ def aspects(
     Aspects
         ``aspects`` (each with working_mode, det_sign, face = WA polygon, area, v, qa_mask,
         qa_area), ``counts`` per working mode, the traced ``curves``, success/status/message.
+
+    Examples
+    --------
+    >>> import optkin
+    >>> a = optkin.aspects(optkin.mechanisms.five_bar(9, 8, 5, 5, 8))
+    >>> a.working_modes
+    [(1, 1), (1, -1), (-1, 1), (-1, -1)]
+    >>> [a.counts[w] for w in a.working_modes]
+    [2, 3, 3, 2]
     """
     t0 = time.perf_counter()
     fixed, names = _check_plane(mech, fixed)
@@ -534,6 +543,14 @@ def workspace(
     Workspace
         ``regions`` and ``areas`` per working mode, ``total`` (faces) and ``area`` of the
         union, success/status/message.
+
+    Examples
+    --------
+    Two annuli 3 <= r <= 13 about A and B, |AB| = 9 (exactly 245.1414):
+
+    >>> import optkin
+    >>> round(optkin.workspace(optkin.mechanisms.five_bar(9, 8, 5, 5, 8)).area, 1)
+    245.1
     """
     t0 = time.perf_counter()
     fixed, names = _check_plane(mech, fixed)

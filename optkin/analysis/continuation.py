@@ -991,7 +991,19 @@ def singular_curves(
     -------
     SingularCurves
         ``curves`` (ordered points with residuals), ``branch_points`` (full v) and
-        ``cusps`` (plane points), ``success``/``status``/``message``.
+        ``cusps`` (full v; ``plane_points`` gives their plane coordinates),
+        ``success``/``status``/``message``.
+
+    Examples
+    --------
+    The five-bar of Chablat and Wenger: in its joint space, C, P and D aligned with
+    |CD| = L2 + L3 (one curve) or C = D (two curves that project to two points).
+
+    >>> import optkin
+    >>> m = optkin.mechanisms.five_bar(9, 8, 5, 5, 8)
+    >>> r = optkin.singular_curves(m, plane="joint")
+    >>> r.count, r.success, r.max_residual < 1e-9
+    (3, True, True)
     """
     t0 = time.perf_counter()
     if not isinstance(mech, Mechanism):
