@@ -290,3 +290,48 @@ def test_docstring_examples():
     mod = importlib.import_module("optkin.analysis.aspects")
     failures, tried = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
     assert tried > 0 and failures == 0
+
+
+def test_rrr3_section_aspects_against_grid():
+    """A 3-RRR at constant orientation phi = 0.2 (8 working modes): aspects per working mode
+    against grid components, with each leg's inverse kinematics and the rows of A
+    (P_i - C_i, cross(R b_i, P_i - C_i)) written by hand."""
+    import itertools
+
+    base = np.array([[0, 0], [10, 0], [5, 8.0]])
+    plat = np.array([[-1, -0.6], [1, -0.6], [0, 1.0]])
+    l1 = l2 = 5.0
+    phi = 0.2
+    a = aspects(optkin.mechanisms.rrr3(base, plat, l1, l2), fixed={"phi": phi})
+    assert a.success and len(a.working_modes) == 8
+    b = a.curves.bounds
+    n = 600
+    xs, ys = np.linspace(*b[0], n), np.linspace(*b[1], n)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    c, s = np.cos(phi), np.sin(phi)
+    legs = []
+    for A, bb in zip(base, plat):
+        Px, Py = X + c * bb[0] - s * bb[1], Y + s * bb[0] + c * bb[1]
+        dx, dy = Px - A[0], Py - A[1]
+        L = np.hypot(dx, dy)
+        cc = (L * L + l1 * l1 - l2 * l2) / (2 * L * l1)
+        al, be = np.arctan2(dy, dx), np.arccos(np.clip(cc, -1, 1))
+        legs.append([(al + sg * be, np.abs(cc) <= 1, Px, Py, A, bb) for sg in (1, -1)])
+    counts = {}
+    for combo in itertools.product(*legs):
+        ok = np.logical_and.reduce([cb[1] for cb in combo])
+        rows, signs = [], []
+        for th, _, Px, Py, A, bb in combo:
+            Cx, Cy = A[0] + l1 * np.cos(th), A[1] + l1 * np.sin(th)
+            ex, ey = Px - Cx, Py - Cy
+            Rb = np.array([c * bb[0] - s * bb[1], s * bb[0] + c * bb[1]])
+            rows.append(np.stack([ex, ey, Rb[0] * ey - Rb[1] * ex], -1))
+            signs.append(-np.sign((Cx - A[0]) * ey - (Cy - A[1]) * ex))
+        det = np.linalg.det(np.stack(rows, -2))
+        k = 0
+        for sg in (1, -1):
+            lab, nl = ndimage.label(ok & (np.sign(det) == sg))
+            sz = ndimage.sum_labels(np.ones_like(lab), lab, np.arange(1, nl + 1))
+            k += int(np.sum(sz > 30))
+        counts[tuple(int(sg[ok][0]) for sg in signs)] = k
+    assert a.counts == counts
