@@ -86,6 +86,13 @@ class BatchResult:
     def __len__(self) -> int:
         return int(self.x.shape[0])
 
+    def __repr__(self) -> str:
+        n = len(self)
+        ok = int(np.sum(self.success))
+        worst = float(np.max(self.residual)) if n else 0.0
+        return (f"BatchResult({ok}/{n} closed, status={self.status!r}, "
+                f"max residual={worst:.2e}, solver={self.stats.solver!r})")
+
     @property
     def all_success(self) -> bool:
         return bool(np.all(self.success))
