@@ -79,6 +79,7 @@ def draw(
     rows = (n + cols - 1) // cols
     spatial = not (mech.planar or (mech.kind == "khalil" and _is_planar_khalil(mech, rs)))
     fig = plt.figure(figsize=(3.6 * cols, 3.4 * rows))
+    lims = _common_limits(mech, rs)
     for i in range(n):
         if spatial:
             ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
@@ -95,8 +96,16 @@ def draw(
                 ax.plot(line[:, 0], line[:, 1], line[:, 2], color=color, **style)
             else:
                 ax.plot(line[:, 0], line[:, 1], color=color, **style)
+        if mech.kind == "legs":  # fixed joints: black triangles
+            base = np.array([np.pad(leg.base, (0, 3 - leg.base.size)) for leg in mech.legs])
+            if spatial:
+                ax.scatter(base[:, 0], base[:, 1], base[:, 2], marker="^", c="k", s=30)
+            else:
+                ax.scatter(base[:, 0], base[:, 1], marker="^", c="k", s=40, zorder=3)
         if not spatial:
-            ax.set_aspect("equal", adjustable="datalim")
+            ax.set_xlim(*lims[0])
+            ax.set_ylim(*lims[1])
+            ax.set_aspect("equal", adjustable="box")
             ax.grid(alpha=0.3)
         label = f"#{i + 1}"
         if r.working_mode is not None:
@@ -117,3 +126,14 @@ def _is_planar_khalil(mech: Mechanism, rs: Sequence[KinResult]) -> bool:
         return False
     pts = np.vstack(chain_points(mech, rs[0]))
     return bool(np.ptp(pts[:, 2]) < 1e-9)
+
+
+def _common_limits(mech: Mechanism, rs: Sequence[KinResult]) -> list[tuple[float, float]]:
+    """Shared x/y limits for every panel, so configurations compare at a glance."""
+    pts = [np.vstack(chain_points(mech, r)) for r in rs]
+    if not pts:
+        return [(-1.0, 1.0), (-1.0, 1.0)]
+    P = np.vstack(pts)
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    c, half = (lo + hi) / 2, max(float(np.max(hi - lo)) / 2, 1e-9) * 1.1
+    return [(c[0] - half, c[0] + half), (c[1] - half, c[1] + half)]
