@@ -166,22 +166,30 @@ def _cmd_show(args: argparse.Namespace) -> int:
     except NotImplementedError:
         _err(f"{path.name}: drawing is not available in this version of optkin (no optkin.plot.draw)")
         return EXIT_FAILED
+    from optkin.problems.tasks import _vector
+
     what = None
-    for task in problem.spec.task:
+    for i, task in enumerate(problem.spec.task):
         if task.kind not in ("forward", "inverse"):  # type: ignore[attr-defined]
             continue
-        if task.kind == "forward":  # type: ignore[attr-defined]
-            res = library_function("forward", "forward")(
-                mech, _as_list(task.qa, mech.active_names), **dict(task.options))  # type: ignore[attr-defined]
-            if res.success:
-                what = res
-                break
-        else:
-            sols = library_function("inverse", "inverse")(
-                mech, np.asarray(task.pose, dtype=float), **dict(task.options))  # type: ignore[attr-defined]
-            if len(sols):
-                what = sols[0]
-                break
+        try:  # a task whose inputs the library rejects is skipped, as a failed one is
+            if task.kind == "forward":  # type: ignore[attr-defined]
+                guess = _vector(task.guess, mech.joint_names,  # type: ignore[attr-defined]
+                                getattr(mech, "home", None))
+                res = library_function("forward", "forward")(
+                    mech, _as_list(task.qa, mech.active_names), guess=guess,  # type: ignore[attr-defined]
+                    **dict(task.options))  # type: ignore[attr-defined]
+                if res.success:
+                    what = res
+                    break
+            else:
+                sols = library_function("inverse", "inverse")(
+                    mech, np.asarray(task.pose, dtype=float), **dict(task.options))  # type: ignore[attr-defined]
+                if len(sols):
+                    what = sols[0]
+                    break
+        except OptkinError as e:
+            _err(f"{path.name}: task[{i}] ({task.kind}) skipped: {e}")  # type: ignore[attr-defined]
     if what is None:
         home = getattr(mech, "home", None)
         try:

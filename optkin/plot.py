@@ -71,8 +71,17 @@ def draw(
 
     Returns the path written.
     """
-    plt = _mpl()
+    from .solvers.common import check_mechanism
+
+    check_mechanism(mech, "draw")
     rs = [results] if isinstance(results, KinResult) else list(results)
+    if not all(isinstance(r, KinResult) for r in rs):
+        from .errors import MechanismError
+
+        raise MechanismError(
+            "results: expected a KinResult or a sequence of them (from optkin.forward, "
+            f"inverse, assembly_modes, track), got {type(results).__name__}")
+    plt = _mpl()
     rs = [r for r in rs if np.all(np.isfinite(r.q))]
     n = max(1, len(rs))
     cols = min(4, n)

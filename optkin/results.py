@@ -44,9 +44,9 @@ def ipopt_status(raw: str) -> str:
 
 def _jsonable(v: Any) -> Any:
     if isinstance(v, np.ndarray):
-        return v.tolist()
+        return _jsonable(v.tolist())  # recurse: NaN and inf entries become None
     if isinstance(v, (np.floating, np.integer, np.bool_)):
-        return v.item()
+        return _jsonable(v.item())
     if isinstance(v, dict):
         return {str(k): _jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
@@ -203,6 +203,8 @@ class SolutionSet(Sequence):
         return f"SolutionSet({self.summary()})"
 
     def nonsingular(self, max_cond: float = 1e8) -> SolutionSet:
+        """The solutions whose condition number of W_p is at most ``max_cond``."""
+        max_cond = float(max_cond)
         keep = [s for s in self._sols if not (np.isfinite(s.cond) and s.cond > max_cond)]
         return SolutionSet(keep, self.kind, self.info, self.seed)
 
@@ -211,6 +213,12 @@ class SolutionSet(Sequence):
         if not self._sols:
             raise IndexError("the solution set is empty")
         q = np.asarray(q, dtype=float)
+        nq = len(self._sols[0].q)
+        if q.shape != (nq,):
+            from .errors import MechanismError
+
+            raise MechanismError(
+                f"q: expected {nq} joint values (as in KinResult.q), got shape {q.shape}")
         d = [float(np.linalg.norm(np.nan_to_num(s.q) - q)) for s in self._sols]
         return self._sols[int(np.argmin(d))]
 

@@ -124,6 +124,11 @@ class Aspects:
     def __iter__(self):
         return iter(self.aspects)
 
+    def __repr__(self) -> str:
+        counts = ", ".join(f"{m}: {n}" for m, n in self.counts.items())
+        return (f"Aspects({self.mechanism!r}, {len(self.aspects)} aspect(s) in "
+                f"{len(self.working_modes)} working mode(s) {{{counts}}}, status={self.status!r})")
+
     def of_mode(self, mode: tuple[int, ...]) -> list[Aspect]:
         return [a for a in self.aspects if a.working_mode == tuple(mode)]
 
@@ -166,6 +171,10 @@ class Workspace:
     qa_masks: dict[tuple[int, ...], np.ndarray] | None = None
     qa_grid: tuple[np.ndarray, np.ndarray] | None = None
     qa_names: tuple[str, ...] = ()
+
+    def __repr__(self) -> str:
+        return (f"Workspace({self.mechanism!r}, plane={self.plane}, area={self.area:.4g}, "
+                f"{len(self.working_modes)} working mode(s), status={self.status!r})")
 
     def to_dict(self) -> dict[str, Any]:
         return {"mechanism": self.mechanism, "success": self.success, "status": self.status,
@@ -273,6 +282,10 @@ def _label(mech: Mechanism, pidx, fixed: dict[int, float], P: np.ndarray, mode,
 
 
 def _check_plane(mech: Mechanism, fixed: Mapping[str, float] | None):
+    if not isinstance(mech, Mechanism):
+        raise MechanismError(
+            f"expected an optkin Mechanism, got {type(mech).__name__}; build one with "
+            "optkin.mechanisms.* or Mechanism.from_legs")
     if mech.kind != "legs" or not mech.planar:
         raise MechanismError(
             f"{mech.name}: aspects and workspaces are computed for planar leg mechanisms "

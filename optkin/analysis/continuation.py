@@ -246,6 +246,11 @@ class SingularCurves:
     time: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        return (f"SingularCurves({self.mechanism!r}, plane={self.plane}, {self.count} curve(s), "
+                f"{len(self.branch_points)} branch point(s), {len(self.cusps)} cusp(s), "
+                f"status={self.status!r})")
+
     @property
     def count(self) -> int:
         return len(self.curves)

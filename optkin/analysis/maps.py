@@ -60,6 +60,11 @@ class SingularityMap:
     fixed: dict[str, float] = field(default_factory=dict)
     path: str | None = None
 
+    def __repr__(self) -> str:
+        reach = int(np.isfinite(self.values["distance"]).sum()) if "distance" in self.values else 0
+        return (f"SingularityMap({self.mech_name!r}, axes={self.axes}, grid {self.v.size} x "
+                f"{self.u.size}, {reach} reachable point(s), path={self.path!r})")
+
     @property
     def reachable(self) -> np.ndarray:
         return np.isfinite(self.values["distance"])
@@ -121,9 +126,10 @@ def singularity_map(
     SingularityMap
     """
     from ..solvers import forward, inverse
+    from ..solvers.common import check_mechanism
 
-    u = np.asarray(u, dtype=float)
-    v = np.asarray(v, dtype=float)
+    check_mechanism(mech, "singularity_map")
+    u, v = _axis_values("u", u), _axis_values("v", v)
     fixed = dict(fixed or {})
     vals = {k: np.full((v.size, u.size), np.nan) for k in MEASURES}
     if mech.kind == "legs":
@@ -203,6 +209,25 @@ def plot_singularity_map(
     Singular curves appear as dark valleys (log10 of the measure); unreachable points are
     left blank. Extra keyword arguments go to :func:`singularity_map`.
 
+    Parameters
+    ----------
+    mech : Mechanism
+    u, v : sequence of float
+        Grid values of the two sampled coordinates (at least two finite values each).
+    path : str
+        The PNG to write.
+    measure : str
+        One of ``"distance"``, ``"parallel"``, ``"serial"``, ``"manipulability"``.
+    log : bool
+        Draw log10 of the measure.
+    **kwargs
+        ``axes``, ``fixed``, ``working_mode``, ``guess`` of :func:`singularity_map`.
+
+    Returns
+    -------
+    SingularityMap
+        The sampled measures, with ``path`` set.
+
     Examples
     --------
     >>> import numpy as np, optkin, tempfile, os
@@ -245,3 +270,16 @@ def plot_singularity_map(
     plt.close(fig)
     sm.path = str(path)
     return sm
+
+
+def _axis_values(name: str, a: Any) -> np.ndarray:
+    """The grid values of one axis: at least two finite numbers, else a MechanismError."""
+    try:
+        out = np.asarray(a, dtype=float)
+    except (TypeError, ValueError):
+        out = np.full(0, np.nan)
+    if out.ndim != 1 or out.size < 2 or not np.all(np.isfinite(out)):
+        raise MechanismError(
+            f"{name}: expected a 1-D sequence of at least 2 finite grid values (e.g. "
+            f"np.linspace(lo, hi, 21)), got {a!r}")
+    return out

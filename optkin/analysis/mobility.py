@@ -24,6 +24,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
 from ..model import khalil as kh
@@ -282,6 +283,14 @@ def dof(mech: Mechanism, samples: int = 5, seed: int = 0, rtol: float = 1e-8) ->
     >>> (r.grubler, r.mobility, r.agree)
     (1, 1, True)
     """
+    if not isinstance(mech, Mechanism):
+        raise MechanismError(
+            f"dof: expected an optkin Mechanism, got {type(mech).__name__}; build one with "
+            "optkin.mechanisms.* or Mechanism.from_khalil / from_legs")
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
+        raise MechanismError(f"dof: samples must be a positive integer (default 5), got {samples!r}")
+    if not (isinstance(rtol, (int, float)) and np.isfinite(rtol) and 0 < rtol < 1):
+        raise MechanismError(f"dof: rtol must be a number in (0, 1) (default 1e-8), got {rtol!r}")
     inv = joint_inventory(mech)
     freedoms = inv["freedoms"]
     lam = inv["lambda"]

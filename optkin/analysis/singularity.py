@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
 from ._functions import analysis_functions
@@ -105,6 +106,8 @@ class SingularityReport:
 
     def __repr__(self) -> str:
         t = ", ".join(sorted(self.types)) or "regular"
+        if not self.success:  # the verdicts hold for a configuration that does not close
+            t += "; NOT CLOSED"
         return f"SingularityReport({t})"
 
     def to_dict(self) -> dict[str, Any]:
@@ -176,8 +179,7 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
     from ..solvers.common import merge_options
 
     opts = merge_options(CLASSIFY_DEFAULTS, options, "classify")
-    rtol = float(opts["rtol"])
-    tol2 = float(opts["second_order_tol"])
+    rtol, tol2 = (_positive_option(opts, k) for k in ("rtol", "second_order_tol"))
     jac = jacobians(mech, q)
     model = get_model(mech)
     f = analysis_functions(mech)
@@ -304,6 +306,20 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
     return SingularityReport(types=types, margins=margins, aliases=aliases, rtol=rtol,
                              success=jac.success, message=msg, legs_at_psik=legs_psik,
                              null_motions=nulls, jacobians=jac)
+
+
+def _positive_option(opts: dict[str, Any], name: str) -> float:
+    """``opts[name]`` as a positive finite float, else a MechanismError naming the option."""
+    v = opts[name]
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        f = float("nan")
+    if isinstance(v, bool) or not (np.isfinite(f) and f > 0):
+        raise MechanismError(
+            f"classify: option {name} must be a positive number (default "
+            f"{CLASSIFY_DEFAULTS[name]!r}), got {v!r}")
+    return f
 
 
 def _degenerate(jac: Jacobians, model: Any, f: Any, Wp_s: np.ndarray, rs: np.ndarray,

@@ -188,7 +188,7 @@ class Jacobians:
 
     def joint_rates(self, qa_dot: Any) -> np.ndarray:
         """All joint rates (``mech.joint_names`` order) for given active rates."""
-        qa_dot = np.asarray(qa_dot, dtype=float)
+        qa_dot = _rates("qa_dot", qa_dot, self.mech.active_names)
         act = np.array(self.mech.actuated)
         npas = int((~act).sum())
         yp = _solve(self.H_p, -self.H_a @ qa_dot)
@@ -199,7 +199,7 @@ class Jacobians:
 
     def twist(self, qa_dot: Any) -> np.ndarray:
         """End-effector twist J_a qdot_a (rows ``twist_names``)."""
-        return self.J_a @ np.asarray(qa_dot, dtype=float)
+        return self.J_a @ _rates("qa_dot", qa_dot, self.mech.active_names)
 
     def accel_term(self, qa_dot: Any = None, qdot: Any = None) -> tuple[np.ndarray, np.ndarray]:
         """(Psi, Phi) of [7.52]: (dJ/dt) qdot, by automatic differentiation.
@@ -213,17 +213,17 @@ class Jacobians:
         f = analysis_functions(self.mech)
         if self.mech.kind == "khalil":
             if qdot is not None:
-                qd = np.asarray(qdot, dtype=float)
+                qd = _rates("qdot", qdot, self.mech.joint_names)
             elif qa_dot is not None:
                 qd = self.joint_rates(qa_dot)
             else:
-                raise ValueError("accel_term: give qa_dot or qdot")
+                raise MechanismError("accel_term: give qa_dot or qdot")
             a = np.array(f.acc_q(self.q, qd)).ravel()
             top, bot = self.info["rows_top"], self.info["rows_bottom"]
             return a[top], a[bot]
         if qa_dot is None:
-            raise ValueError("accel_term: give qa_dot (the active rates) for a platform")
-        qa_dot = np.asarray(qa_dot, dtype=float)
+            raise MechanismError("accel_term: give qa_dot (the active rates) for a platform")
+        qa_dot = _rates("qa_dot", qa_dot, self.mech.active_names)
         xd = self.W_x @ qa_dot
         a = np.array(f.acc_x(self.qa, self.x, qa_dot, xd)).ravel()
         return a, np.zeros(0)
@@ -409,3 +409,15 @@ def stewart_gough_statics(mech: Mechanism, T: np.ndarray) -> np.ndarray:
         n = (Pi - qi) / np.linalg.norm(Pi - qi)
         rows.append(np.concatenate([-np.cross(n, qi), n]))
     return np.array(rows)
+
+
+def _rates(name: str, v: Any, names: Any) -> np.ndarray:
+    """Joint rates as a float vector of one entry per name, else a MechanismError."""
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        a = np.full(0, np.nan)
+    if a.shape != (len(names),) or not np.all(np.isfinite(a)):
+        raise MechanismError(
+            f"{name}: expected {len(names)} finite rates, one per joint {list(names)}, got {v!r}")
+    return a

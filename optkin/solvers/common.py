@@ -14,7 +14,7 @@ from ..errors import MechanismError
 from ..model import Model
 from ..results import KinResult, SolverStats
 
-__all__ = ["merge_options", "check_qa", "newton", "make_result", "parse_guess"]
+__all__ = ["merge_options", "check_qa", "check_mechanism", "newton", "make_result", "parse_guess"]
 
 
 def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: str) -> dict[str, Any]:
@@ -29,6 +29,16 @@ def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: 
             continue
         out[k] = v
     return out
+
+
+def check_mechanism(mech: Any, where: str) -> None:
+    """Raise a MechanismError naming ``where`` unless ``mech`` is an optkin Mechanism."""
+    from ..mechanism import Mechanism
+
+    if not isinstance(mech, Mechanism):
+        raise MechanismError(
+            f"{where}: expected an optkin Mechanism, got {type(mech).__name__}; build one "
+            "with optkin.mechanisms.* or Mechanism.from_khalil / from_legs")
 
 
 def check_qa(model: Model, qa: Any) -> np.ndarray:

@@ -63,7 +63,15 @@ from ..mechanism import Mechanism
 from ..mechanism.geometry import wrap_angle
 from ..model import Model, get_model
 from ..results import KinResult, SolutionSet, SolverStats
-from .common import check_qa, make_result, merge_options, newton, parse_guess, timer
+from .common import (
+    check_mechanism,
+    check_qa,
+    make_result,
+    merge_options,
+    newton,
+    parse_guess,
+    timer,
+)
 
 __all__ = [
     "assembly_modes",
@@ -1096,6 +1104,7 @@ def working_modes(mech: Mechanism, pose: Any = None) -> WorkingModes:
     >>> len(wm), len(wm.existing)
     (4, 4)
     """
+    check_mechanism(mech, "working_modes")
     if mech.kind != "legs":
         raise MechanismError(
             f"{mech.name}: working modes are defined for fully parallel mechanisms (one "

@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
 from ..results import KinResult, SolverStats, ipopt_status
@@ -60,10 +61,13 @@ def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinR
     model.note_use()  # compiles the model's Functions once it is in heavy use
     qa = check_qa(model, qa)
     x0 = parse_guess(model, qa, guess)
-    tol = float(opts["tol"])
+    tol = _option_number(opts, "tol", 0.0)
+    for k in ("max_iter", "polish"):
+        _option_number(opts, k, -1.0)
     method = opts["method"]
     if method not in ("auto", "ipopt", "newton"):
-        raise ValueError(f"forward: method must be 'auto', 'ipopt' or 'newton', got {method!r}")
+        raise MechanismError(
+            f"forward: option method must be 'auto', 'ipopt' or 'newton', got {method!r}")
     t0 = timer()
     if method in ("auto", "newton"):
         x, r, nit, ok = newton(model, qa, x0.copy(), tol, int(opts["max_iter"]))
@@ -97,3 +101,18 @@ def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinR
             "joint values may be out of reach (e.g. legs too short to close)"
         )
     return make_result(model, qa, x, tol, nit + npol, stats, status, msg)
+
+
+def _option_number(opts: dict[str, Any], name: str, above: float) -> float:
+    """``opts[name]`` as a finite float greater than ``above``, else a MechanismError."""
+    v = opts[name]
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        f = float("nan")
+    if isinstance(v, bool) or not np.isfinite(f) or f <= above:
+        what = "a positive number" if above == 0 else "a non-negative number"
+        raise MechanismError(
+            f"forward: option {name} must be {what} (default {FORWARD_DEFAULTS[name]!r}), "
+            f"got {v!r}")
+    return f

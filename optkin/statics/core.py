@@ -128,6 +128,18 @@ def _directions(directions: Any, sm: StaticModel) -> np.ndarray:
 def box(lower: Any, upper: Any) -> np.ndarray:
     """The 2^m vertices (rows) of the wrench box lower <= F <= upper.
 
+    Parameters
+    ----------
+    lower, upper : array (m,)
+        Finite bounds of each wrench component, ``lower <= upper``.
+
+    Returns
+    -------
+    ndarray (2^m, m)
+        The corners, in binary order (last component fastest).
+
+    Examples
+    --------
     >>> box([-1, 0], [1, 2]).tolist()
     [[-1.0, 0.0], [-1.0, 2.0], [1.0, 0.0], [1.0, 2.0]]
     """
@@ -334,6 +346,11 @@ def capability_many(
         The configurations.
     chunk : int
         Poses per LP (the last chunk is padded by repeating its last pose).
+
+    Returns
+    -------
+    list of CapabilityResult
+        One per configuration, in the order of ``qs`` (empty for no configuration).
     """
     opts = merge_options(STATICS_DEFAULTS, options, "capability_many")
     qs = list(qs)
@@ -376,10 +393,36 @@ def capability_polygon(
     mech: Mechanism, q: Any, limits: Any, n: int = 72, plane: Sequence[str] = ("fx", "fy"),
     path: str | None = None, **options: Any,
 ) -> CapabilityResult:
-    """Capability along ``n`` directions spread over the plane of two wrench components
-    (default the forces fx, fy with zero moment): the boundary of the capability polygon,
-    optionally drawn to the PNG ``path`` (:func:`optkin.statics.plot_capability`)."""
+    """Capability along ``n`` directions spread over the plane of two wrench components.
+
+    The directions cover the plane of ``plane`` (default the forces fx, fy with zero
+    moment): the boundary of the capability polygon, optionally drawn to the PNG ``path``
+    (:func:`optkin.statics.plot_capability`).
+
+    Parameters
+    ----------
+    mech : Mechanism
+    q : array or KinResult
+        A closed configuration (``KinResult.q`` or the result itself).
+    limits : float, array or pairs
+        Actuator limits, as for :func:`capability`.
+    n : int
+        Number of directions (at least 3), evenly spread over the circle.
+    plane : (str, str)
+        Two different wrench components (:func:`optkin.statics.wrench_names`).
+    path : str, optional
+        Where to draw the polygon (PNG).
+    **options
+        See :data:`STATICS_DEFAULTS`.
+
+    Returns
+    -------
+    CapabilityResult
+        The largest wrench along each direction (``max``), as :func:`capability`.
+    """
     opts = merge_options(STATICS_DEFAULTS, options, "capability_polygon")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 3:
+        raise StaticsError(f"n: expected an integer number of directions >= 3, got {n!r}")
     sm = static_model(mech, q, float(opts["sing_tol"]))
     names = list(sm.wrench_names)
     for c in plane:
@@ -413,6 +456,20 @@ def polytope(mech: Mechanism, q: Any, limits: Any, **options: Any) -> PolytopeRe
     Its vertices are among the images of the 2^na corners of the actuator box; scipy's
     ConvexHull gives the facets. Flat at a parallel singularity (``dimension < m``).
     Undefined at a serial singularity (``success=False``).
+
+    Parameters
+    ----------
+    mech : Mechanism
+    q : array or KinResult
+        A closed configuration (``KinResult.q`` or the result itself).
+    limits : float, array or pairs
+        Actuator limits, as for :func:`capability`.
+    **options
+        See :data:`STATICS_DEFAULTS`.
+
+    Returns
+    -------
+    PolytopeResult
     """
     opts = merge_options(STATICS_DEFAULTS, options, "polytope")
     sm = static_model(mech, q, float(opts["sing_tol"]))
@@ -612,15 +669,34 @@ def wrench_feasible_workspace(
         box of the base joints), the other coordinates from ``fixed`` (default home or 0).
     path : str, optional
         Write a PNG map of the margin (:func:`optkin.statics.plot_workspace`).
+
+    Returns
+    -------
+    WorkspaceResult
+        The margin and feasibility at every pose; unreachable poses (no posture, or none
+        with ``working_mode``) are data, not errors.
     """
+    from ..solvers.common import check_mechanism
     from ..solvers.inverse import inverse
 
+    check_mechanism(mech, "wrench_feasible_workspace")
     opts = merge_options(STATICS_DEFAULTS, options, "wrench_feasible_workspace")
     td = mech.task_dim
     tnames = tuple(mech.task)
     grid_shape = None
+    if isinstance(posture, bool) or not isinstance(posture, (int, np.integer)) or posture < 0:
+        raise StaticsError(f"posture: expected a non-negative integer index, got {posture!r}")
+    if working_mode is not None:
+        wm_ok = np.asarray(working_mode, dtype=object).ravel()
+        if wm_ok.size != mech.n_actuated or any(v not in (1, -1) for v in wm_ok):
+            raise StaticsError(
+                f"working_mode: expected {mech.n_actuated} signs (+1 or -1), one per actuator "
+                f"{list(mech.active_names)}, got {working_mode!r}")
     if poses is None:
-        g = np.broadcast_to(np.asarray(grid, dtype=int), (2,))
+        g = _numbers("grid", grid, int, "an integer or two integers (points per axis)")
+        if g.size not in (1, 2):
+            raise StaticsError(f"grid: expected an integer or two integers, got {grid!r}")
+        g = np.broadcast_to(g, (2,))
         if np.any(g < 2):
             raise StaticsError(f"grid: expected at least 2 points per axis, got {grid!r}")
         if bounds is None:
@@ -628,14 +704,14 @@ def wrench_feasible_workspace(
                 raise StaticsError("bounds: required for a Khalil mechanism ([[lo, hi], [lo, hi]])")
             pts = np.array([leg.base[:2] for leg in mech.legs])
             bounds = np.column_stack([pts.min(axis=0), pts.max(axis=0)])
-        b = np.asarray(bounds, dtype=float)
-        if b.shape != (2, 2) or np.any(b[:, 0] >= b[:, 1]):
+        b = _numbers("bounds", bounds, float, "[[lo, hi], [lo, hi]] with lo < hi")
+        if b.shape != (2, 2) or not np.all(np.isfinite(b)) or np.any(b[:, 0] >= b[:, 1]):
             raise StaticsError(f"bounds: expected [[lo, hi], [lo, hi]] with lo < hi, got {bounds!r}")
         if fixed is None:
             fixed = mech.home if (mech.kind == "legs" and mech.home is not None) else np.zeros(td)
-        f = np.asarray(fixed, dtype=float).ravel()
-        if f.shape != (td,):
-            raise StaticsError(f"fixed: expected {td} task coordinates {list(tnames)}")
+        f = _numbers("fixed", fixed, float, f"{td} task coordinates {list(tnames)}").ravel()
+        if f.shape != (td,) or not np.all(np.isfinite(f)):
+            raise StaticsError(f"fixed: expected {td} finite task coordinates {list(tnames)}")
         xs = np.linspace(b[0, 0], b[0, 1], int(g[0]))
         ys = np.linspace(b[1, 0], b[1, 1], int(g[1]))
         X, Y = np.meshgrid(xs, ys, indexing="xy")
@@ -643,9 +719,10 @@ def wrench_feasible_workspace(
         P[:, 0], P[:, 1] = X.ravel(), Y.ravel()
         grid_shape = X.shape
     else:
-        P = np.atleast_2d(np.asarray(poses, dtype=float))
-        if P.ndim != 2 or P.shape[1] != td:
-            raise StaticsError(f"poses: expected an array (N, {td}) of task coordinates {list(tnames)}")
+        P = np.atleast_2d(_numbers("poses", poses, float, f"an array (N, {td}) of task coordinates"))
+        if P.ndim != 2 or P.shape[1] != td or not np.all(np.isfinite(P)):
+            raise StaticsError(
+                f"poses: expected an array (N, {td}) of finite task coordinates {list(tnames)}")
     N = P.shape[0]
     margin = np.full(N, np.nan)
     feas = np.zeros(N, dtype=bool)
@@ -819,3 +896,11 @@ def distribute(
                               status=status if sm.singularity == "none" else "singular",
                               message=msg, singularity=sm.singularity,
                               actuator_names=sm.actuator_names, stats=stats)
+
+
+def _numbers(name: str, v: Any, dtype: type, expected: str) -> np.ndarray:
+    """``np.asarray(v, dtype)``, or a StaticsError naming ``name`` and what was expected."""
+    try:
+        return np.asarray(v, dtype=dtype)
+    except (TypeError, ValueError):
+        raise StaticsError(f"{name}: expected {expected}, got {v!r}") from None

@@ -84,7 +84,27 @@ _TASK_TO_TWIST = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
 
 
 def wrench_names(mech: Mechanism) -> tuple[str, ...]:
-    """Names of the task wrench components of ``mech`` (order of ``F``)."""
+    """Names of the task wrench components of ``mech`` (order of ``F``).
+
+    Parameters
+    ----------
+    mech : Mechanism
+
+    Returns
+    -------
+    tuple of str
+        E.g. ``("fx", "fy", "mz")`` for a planar platform.
+
+    Examples
+    --------
+    >>> import optkin
+    >>> wrench_names(optkin.mechanisms.five_bar(2.0, 1.5, 2.0, 2.0, 1.5))
+    ('fx', 'fy')
+    """
+    if not isinstance(mech, Mechanism):
+        raise MechanismError(
+            f"mech: expected an optkin Mechanism, got {type(mech).__name__}; build one with "
+            "optkin.mechanisms.* or Mechanism.from_khalil / from_legs")
     if mech.kind == "khalil":
         return tuple(_TASK_TO_WRENCH[c] for c in mech.task)
     return {
@@ -135,6 +155,11 @@ class StaticModel:
     sing_tol: float = SING_TOL
     extra: dict[str, Any] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        return (f"StaticModel(wrench {list(self.wrench_names)}, actuators "
+                f"{list(self.actuator_names)}, singularity={self.singularity!r}, "
+                f"cond={self.cond:.3g})")
+
     @property
     def m(self) -> int:
         """Dimension of the wrench (task) space."""
@@ -152,11 +177,14 @@ class StaticModel:
         """
         from ..errors import StaticsError
 
-        t = np.asarray(tau, dtype=float).ravel()
-        if t.shape != (self.na,):
+        try:
+            t = np.asarray(tau, dtype=float).ravel()
+        except (TypeError, ValueError):
+            t = np.full(0, np.nan)
+        if t.shape != (self.na,) or not np.all(np.isfinite(t)):
             raise StaticsError(
-                f"tau: expected {self.na} actuator forces {list(self.actuator_names)}, got "
-                f"shape {np.shape(tau)}"
+                f"tau: expected {self.na} finite actuator forces {list(self.actuator_names)}, "
+                f"got {tau!r}"
             )
         if self.G is None:
             raise StaticsError(
@@ -186,6 +214,11 @@ def _config(model: Model, q: Any) -> tuple[np.ndarray, np.ndarray]:
     """(q_a, x) from a KinResult or a full joint vector."""
     mech = model.mech
     if isinstance(q, KinResult):
+        if not q.success:
+            raise MechanismError(
+                f"q: the KinResult did not close the loops (status {q.status!r}, max |Phi| = "
+                f"{q.residual:.2e}); statics needs a closed configuration: pass a successful "
+                "result of optkin.forward / optkin.inverse")
         return np.asarray(q.qa, dtype=float), np.asarray(q.x, dtype=float)
     try:
         qq = np.asarray(q, dtype=float)

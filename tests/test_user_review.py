@@ -1,0 +1,356 @@
+"""Regression tests of a user review: bad inputs, result objects, CLI edge cases.
+
+Each test pins one defect found by calling the public API the way a new user would: bad
+input raises a subclass of ValueError from :mod:`optkin.errors` naming the argument (never a
+bare numpy / casadi exception), results print on one line and serialise to strict JSON.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import optkin
+from optkin import mechanisms as M
+from optkin import statics
+from optkin.cli import main
+from optkin.errors import MechanismError, OptkinError, StaticsError
+
+ROOT = Path(__file__).resolve().parents[1]
+PROBLEMS = ROOT / "problems"
+
+
+@pytest.fixture(scope="module")
+def rpr3():
+    return M.rpr3(base=[[0, 0], [1, 0], [0.5, 0.9]],
+                  platform=[[-0.2, -0.1], [0.25, -0.2], [0.05, 0.25]])
+
+
+@pytest.fixture(scope="module")
+def closed(rpr3):
+    """A closed 3-RPR configuration (inverse model, leg by leg)."""
+    return optkin.inverse(rpr3, [0.45, 0.35, 0.1])[0]
+
+
+@pytest.fixture(scope="module")
+def unclosed(rpr3):
+    """A forward solve that cannot close: leg 1 far longer than the others can follow."""
+    r = optkin.forward(rpr3, [10.0, 0.1, 0.1])
+    assert not r.success
+    return r
+
+
+def _one_line(obj, limit: int = 300) -> str:
+    s = repr(obj)
+    assert "\n" not in s and len(s) <= limit, s
+    return s
+
+
+# ---------------------------------------------------------------------------
+# results serialise to strict JSON (NaN / inf -> None)
+# ---------------------------------------------------------------------------
+
+
+def test_kinresult_to_dict_turns_nan_entries_of_arrays_into_none():
+    nan = float("nan")
+    r = optkin.KinResult(
+        q=np.array([nan, 1.0]), qa=np.array([1.0]), qp=np.array([nan]), qc=np.zeros(0),
+        x=np.array([nan]), pose=np.full((4, 4), nan), success=False, status="error",
+        message="diverged", residual=np.float64(nan), cond=np.float64(np.inf))
+    d = r.to_dict()
+    text = json.dumps(d, allow_nan=False)  # strict JSON: raises on NaN / Infinity
+    assert d["q"] == [None, 1.0] and d["residual"] is None and d["cond"] is None
+    assert json.loads(text)["pose"][0] == [None] * 4
+
+
+def test_solution_set_to_dict_is_strict_json(rpr3, closed, unclosed):
+    s = optkin.SolutionSet([closed, unclosed], kind="mixed", info={"p": np.float64(np.nan)})
+    d = json.loads(json.dumps(s.to_dict(), allow_nan=False))
+    assert d["count"] == 2 and d["info"]["p"] is None
+
+
+# ---------------------------------------------------------------------------
+# forward: options
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("opts, word", [
+    ({"method": "newtn"}, "method"),
+    ({"tol": "tight"}, "tol"),
+    ({"tol": -1.0}, "tol"),
+    ({"tol": float("nan")}, "tol"),
+    ({"max_iter": -3}, "max_iter"),
+    ({"polish": None}, "polish"),
+])
+def test_forward_rejects_bad_option_values_naming_the_option(rpr3, closed, opts, word):
+    with pytest.raises(MechanismError, match=rf"forward: option {word} must be"):
+        optkin.forward(rpr3, closed.qa, **opts)
+
+
+def test_forward_accepts_good_option_values(rpr3, closed):
+    r = optkin.forward(rpr3, closed.qa, guess=closed, tol=1e-9, max_iter=20, method="newton")
+    assert r.success and r.residual <= 1e-9
+
+
+# ---------------------------------------------------------------------------
+# a mechanism of the wrong type
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("call", [
+    lambda: optkin.dof("five_bar"),
+    lambda: optkin.working_modes("five_bar"),
+    lambda: optkin.aspects("five_bar"),
+    lambda: optkin.workspace("five_bar"),
+    lambda: optkin.plot_singularity_map("five_bar", [0, 1], [0, 1], "x.png"),
+    lambda: statics.wrench_feasible_workspace("five_bar", [0, 0, 0], 1.0),
+    lambda: statics.wrench_names("five_bar"),
+], ids=["dof", "working_modes", "aspects", "workspace", "plot_singularity_map",
+        "wrench_feasible_workspace", "wrench_names"])
+def test_public_functions_reject_a_non_mechanism(call):
+    with pytest.raises(MechanismError, match="expected an optkin Mechanism, got str"):
+        call()
+
+
+@pytest.mark.parametrize("kw, word", [
+    ({"samples": 0}, "samples"),
+    ({"samples": [1, 2]}, "samples"),
+    ({"rtol": -1.0}, "rtol"),
+])
+def test_dof_rejects_bad_arguments(kw, word):
+    with pytest.raises(MechanismError, match=rf"dof: {word} must be"):
+        optkin.dof(M.four_bar(4, 4, 2, 2), **kw)
+
+
+# ---------------------------------------------------------------------------
+# analyses: options, rates, grids
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kw", [{"rtol": "small"}, {"rtol": 0.0},
+                                {"second_order_tol": None}])
+def test_classify_rejects_bad_option_values(rpr3, closed, kw):
+    name = next(iter(kw))
+    with pytest.raises(MechanismError, match=rf"classify: option {name} must be a positive"):
+        optkin.classify(rpr3, closed, **kw)
+
+
+def test_classify_report_of_an_unclosed_configuration_says_so(rpr3, unclosed):
+    rep = optkin.classify(rpr3, unclosed)
+    assert not rep.success
+    assert "NOT CLOSED" in _one_line(rep)
+
+
+@pytest.mark.parametrize("method, arg, name", [
+    ("joint_rates", [1.0, 2.0], "qa_dot"),
+    ("twist", [1.0, float("nan"), 0.0], "qa_dot"),
+    ("accel_term", "fast", "qa_dot"),
+])
+def test_jacobian_rates_of_the_wrong_length_name_the_argument(rpr3, closed, method, arg, name):
+    jac = optkin.jacobians(rpr3, closed)
+    with pytest.raises(MechanismError, match=rf"{name}: expected 3 finite rates"):
+        getattr(jac, method)(arg)
+
+
+def test_jacobian_rates_still_match_finite_differences(rpr3, closed):
+    """The checked joint_rates agree with a finite difference of two forward solves."""
+    jac = optkin.jacobians(rpr3, closed)
+    d = np.array([0.3, -0.2, 0.5])
+    h = 1e-6
+    qp = optkin.forward(rpr3, closed.qa + h * d, guess=closed).q
+    qm = optkin.forward(rpr3, closed.qa - h * d, guess=closed).q
+    assert np.allclose(jac.joint_rates(d), (qp - qm) / (2 * h), atol=1e-6)
+
+
+@pytest.mark.parametrize("u, v", [([], [0, 1]), ([0.0, np.nan], [0, 1]), ([0, 1], "abc"),
+                                  ([[0, 1], [2, 3]], [0, 1])])
+def test_singularity_map_rejects_bad_grids(tmp_path, u, v):
+    m = M.five_bar(1, 1, 1, 1, 1)
+    with pytest.raises(MechanismError, match=r"^[uv]: expected a 1-D sequence"):
+        optkin.plot_singularity_map(m, u, v, str(tmp_path / "m.png"))
+
+
+def test_solution_set_closest_to_names_the_expected_length(closed):
+    s = optkin.SolutionSet([closed])
+    with pytest.raises(MechanismError, match=r"q: expected 9 joint values"):
+        s.closest_to([1.0, 2.0])
+    assert s.closest_to(closed.q) is closed
+
+
+def test_draw_rejects_something_that_is_not_a_result(rpr3, tmp_path):
+    with pytest.raises(MechanismError, match="results: expected a KinResult"):
+        optkin.plot.draw(rpr3, "pose", str(tmp_path / "x.png"))
+
+
+# ---------------------------------------------------------------------------
+# statics
+# ---------------------------------------------------------------------------
+
+
+def test_statics_refuse_an_unclosed_configuration(rpr3, unclosed):
+    for call in (lambda: statics.capability(rpr3, unclosed, limits=1.0),
+                 lambda: statics.static_model(rpr3, unclosed),
+                 lambda: statics.distribute(rpr3, unclosed, [0, -1, 0])):
+        with pytest.raises(MechanismError, match="did not close the loops"):
+            call()
+
+
+@pytest.mark.parametrize("kw, word", [
+    ({"fixed": {"zz": 1.0}}, "fixed"),
+    ({"fixed": [0.5, 0.4, np.inf]}, "fixed"),
+    ({"grid": "fine"}, "grid"),
+    ({"grid": [3, 4, 5]}, "grid"),
+    ({"bounds": "box"}, "bounds"),
+    ({"bounds": [[0, np.nan], [0, 1]]}, "bounds"),
+    ({"posture": -1}, "posture"),
+    ({"working_mode": [1, 1]}, "working_mode"),
+    ({"working_mode": [1, 1, 2]}, "working_mode"),
+    ({"poses": "here"}, "poses"),
+    ({"poses": [[np.nan, 0.0, 0.0]]}, "poses"),
+])
+def test_wrench_feasible_workspace_rejects_bad_arguments(rpr3, kw, word):
+    kw = {"grid": 3, **kw}
+    with pytest.raises(StaticsError, match=rf"^{word}: expected"):
+        statics.wrench_feasible_workspace(rpr3, [0, -0.1, 0], 1.0, **kw)
+
+
+def test_static_model_repr_is_one_line_and_wrench_checks_tau(rpr3, closed):
+    sm = statics.static_model(rpr3, closed)
+    assert "singularity='none'" in _one_line(sm)
+    for tau in ("strong", [1.0, 2.0], [1.0, np.nan, 1.0]):
+        with pytest.raises(StaticsError, match=r"tau: expected 3 finite actuator forces"):
+            sm.wrench(tau)
+    # F = G tau against virtual work: tau . qa_dot = F . t for t = J qa_dot (J = G^T)
+    tau = np.array([0.3, -0.7, 0.2])
+    qd = np.array([0.1, 0.4, -0.2])
+    t = optkin.jacobians(rpr3, closed).J_a @ qd
+    assert math.isclose(float(sm.wrench(tau) @ t), float(tau @ qd), rel_tol=1e-9, abs_tol=1e-12)
+
+
+# ---------------------------------------------------------------------------
+# printable results
+# ---------------------------------------------------------------------------
+
+
+def test_analysis_results_print_on_one_line():
+    five = M.five_bar(9, 8, 5, 5, 8)
+    curves = optkin.singular_curves(five)
+    assert _one_line(curves).startswith("SingularCurves('five-bar'")
+    asp = optkin.aspects(five)
+    s = _one_line(asp)
+    assert f"{len(asp)} aspect(s)" in s and "working mode(s)" in s
+    ws = optkin.workspace(five)
+    assert _one_line(ws).startswith("Workspace('five-bar'")
+    for obj in (curves, asp, ws):
+        json.dumps(obj.to_dict(), allow_nan=False)
+
+
+def test_singularity_map_prints_on_one_line(tmp_path):
+    m = M.five_bar(1, 1, 1, 1, 1)
+    sm = optkin.plot_singularity_map(m, np.linspace(-0.5, 1.5, 4), np.linspace(0.2, 1.8, 3),
+                                     str(tmp_path / "m.png"))
+    assert "grid 3 x 4" in _one_line(sm)
+
+
+# ---------------------------------------------------------------------------
+# CLI: show uses the task's guess, and skips a task the library rejects
+# ---------------------------------------------------------------------------
+
+
+def _four_bar_modes(L1, L2, L3, L4, theta):
+    """Rocker angles phi of both assembly modes: two circles intersected (MR 7.3)."""
+    B = L1 * np.array([math.cos(theta), math.sin(theta)])
+    D = np.array([L4, 0.0])
+    d = float(np.linalg.norm(D - B))
+    a = (L2**2 - L3**2 + d**2) / (2 * d)
+    h = math.sqrt(L2**2 - a**2)
+    u = (D - B) / d
+    n = np.array([-u[1], u[0]])
+    E = [B + a * u + h * n, B + a * u - h * n]
+    return sorted(math.atan2(e[1], e[0] - L4) for e in E)
+
+
+def test_show_draws_the_assembly_mode_the_guess_selects(tmp_path, monkeypatch):
+    L = (1.0, 2.0, 2.0, 2.5)
+    crossed, _open = _four_bar_modes(*L, 1.0)  # crossed mode: phi < 0 here
+    toml = f"""schema_version = 1
+name = "four_bar_crossed"
+[mechanism]
+type = "library"
+name = "four_bar"
+args = {{ L1 = {L[0]}, L2 = {L[1]}, L3 = {L[2]}, L4 = {L[3]} }}
+[[task]]
+kind = "forward"
+qa = [1.0]
+guess = {{ theta2 = -2.3, phi = -2.5, theta4 = -1.1 }}
+"""
+    f = tmp_path / "fb.toml"
+    f.write_text(toml)
+    drawn = []
+    monkeypatch.setattr(optkin.plot, "draw", lambda mech, what, path, *a, **k: drawn.append(what))
+    assert main(["show", str(f), "--out", str(tmp_path / "fb.png")]) == 0
+    (res,) = drawn
+    phi = dict(zip(res.joint_names, res.q))["phi"]
+    assert math.isclose(phi, crossed, abs_tol=1e-8)
+
+
+def test_show_skips_a_first_task_the_library_rejects(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    text = (PROBLEMS / "rpr3.toml").read_text()
+    i = text.index("[[task]]")
+    j = text.index("[[task]]", i + 1)
+    inverse_task, forward_task = text[i:j], text[j:]
+    start = forward_task.index("qa = [")
+    end = forward_task.index("]", start)
+    forward_task = forward_task[:start] + "qa = [-1.0, 2.0, 2.0" + forward_task[end:]
+    f = tmp_path / "rpr3_bad_first.toml"
+    f.write_text(text[:i] + forward_task + "\n" + inverse_task)
+    png = tmp_path / "out.png"
+    assert main(["show", str(f), "--out", str(png)]) == 0
+    err = capsys.readouterr().err
+    assert "task[0] (forward) skipped: qa[0] (L1.rho): a leg length must be positive" in err
+    assert "Traceback" not in err
+    assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize("setup", ["empty", "missing", "not_toml", "readme_only"])
+@pytest.mark.parametrize("command", ["run", "validate", "show"])
+def test_cli_odd_paths_exit_2_without_traceback(tmp_path, capsys, command, setup):
+    p = tmp_path / setup
+    if setup in ("empty", "readme_only"):
+        p.mkdir()
+        if setup == "readme_only":
+            (p / "README.md").write_text("# notes\n")
+    elif setup == "not_toml":
+        p = tmp_path / "notes.txt"
+        p.write_text("hello [[[\n")
+    args = [command, str(p)] + (["--out", str(tmp_path / "res")] if command == "run" else [])
+    assert main(args) == 2
+    out = capsys.readouterr()
+    assert "Traceback" not in out.err + out.out
+    assert out.err.strip()
+
+
+def test_every_public_error_is_a_value_error():
+    for cls in (MechanismError, StaticsError, optkin.ProblemFileError):
+        assert issubclass(cls, ValueError) and issubclass(cls, OptkinError)
+
+
+@pytest.mark.parametrize("n", [0, 2, "many", 7.5])
+def test_capability_polygon_rejects_a_bad_number_of_directions(rpr3, closed, n):
+    with pytest.raises(StaticsError, match=r"^n: expected an integer number of directions"):
+        statics.capability_polygon(rpr3, closed, 1.0, n=n)
+
+
+def test_capability_polygon_at_three_directions_matches_virtual_work(rpr3, closed):
+    """|tau_i| <= 1 and tau = J_a^T F (virtual work): max s along d is 1 / |J_a^T d|_inf."""
+    poly = statics.capability_polygon(rpr3, closed, 1.0, n=3)
+    J = optkin.jacobians(rpr3, closed).J_a
+    th = np.linspace(0, 2 * np.pi, 3, endpoint=False)
+    D = np.column_stack([np.cos(th), np.sin(th), np.zeros(3)])
+    expected = [1.0 / np.max(np.abs(J.T @ d)) for d in D]
+    assert poly.success and np.allclose(poly.max, expected, rtol=1e-6)
