@@ -9,6 +9,7 @@ the end-effector pose, and lazily the IPOPT solver of the direct geometric model
 
 from __future__ import annotations
 
+import hashlib
 import math
 import threading
 import time
@@ -147,6 +148,7 @@ class Model:
         self._gen = 0
         self._result_fn: ca.Function | None = None
         self._tracker: dict[tuple[int, int], ca.Function] = {}
+        self._guard: dict[int, ca.Function] = {}
         self._compile_lock = threading.Lock()
         self._compile_failed = False
         mode = cc.compile_mode()
@@ -295,7 +297,8 @@ class Model:
             f = self._result_fn
         return f
 
-    def compile(self, build: bool = True, tracker: tuple[int, int] | None = None) -> bool:
+    def compile(self, build: bool = True, tracker: tuple[int, int] | None = None,
+                guard: int | None = None) -> bool:
         """Use compiled C versions of the step, residual, Jacobians, pose and result.
 
         Loads them from the disk cache, or (``build=True``) generates and compiles them
@@ -303,11 +306,12 @@ class Model:
         compiled Newton step; ``phi``, ``jac`` and ``pose_fn`` stay the SX Functions (they
         are used symbolically), their compiled twins are in ``compiled_fns``. ``tracker``
         = (chunk, iters) also prepares :meth:`tracker`, the two libraries being compiled
-        in parallel. Returns whether compiled code is in use; without a compiler nothing
-        changes.
+        in parallel; ``guard`` = chunk likewise prepares :meth:`guard`. Returns whether
+        compiled code is in use; without a compiler nothing changes.
         """
         want_tr = tracker is not None and (int(tracker[0]), int(tracker[1])) not in self._tracker
-        if self.compiled_step is not None and not want_tr:
+        want_g = guard is not None and int(guard) not in self._guard
+        if self.compiled_step is not None and not want_tr and not want_g:
             return True
         if self._compile_failed and build:
             return False
@@ -321,7 +325,13 @@ class Model:
             if want_tr:
                 f_tr = self._tracker_sx(*tracker)
                 reqs.append((self._tracker_tag(*tracker), [f_tr]))
+            if want_g:
+                f_g, tag_g = self._guard_sx(int(guard))
+                reqs.append((tag_g, [f_g]))
             libs = cc.libraries(reqs, build=build)
+            if want_g:
+                lib_g = libs.pop()
+                self._guard[int(guard)] = lib_g[f_g.name()] if lib_g is not None else f_g
             if want_tr:
                 lib_tr = libs[-1]
                 self._tracker[(int(tracker[0]), int(tracker[1]))] = (
@@ -385,6 +395,27 @@ class Model:
             if lib is not None:
                 f = lib[f.name()]
             self._tracker[key] = f
+        return f, f.is_a("External")
+
+    def _guard_sx(self, chunk: int) -> tuple[ca.Function, str]:
+        """The mapped guard and its cache tag (which hashes the inner Function: the
+        signature of a mapped Function does not change with its body)."""
+        one = fused.guard_function(self)
+        body = hashlib.sha256(one.serialize().encode()).hexdigest()[:16]
+        f = one.map(f"guard_{int(chunk)}", "serial", int(chunk), [], [])
+        return f, f"guard:{self.mech.key}:{int(chunk)}:{body}"
+
+    def guard(self, chunk: int) -> tuple[ca.Function, bool]:
+        """The checks of ``forward_batch`` (det W_p, conditioning, distance to the Euler
+        predictions; :func:`optkin.model.fused.guard_function`) mapped over ``chunk`` rows,
+        and whether it is compiled."""
+        f = self._guard.get(int(chunk))
+        if f is None:
+            f, tag = self._guard_sx(chunk)
+            lib = cc.library(tag, [f])
+            if lib is not None:
+                f = lib[f.name()]
+            self._guard[int(chunk)] = f
         return f, f.is_a("External")
 
     # -------------------------------------------------------------- solvers

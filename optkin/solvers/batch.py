@@ -10,10 +10,17 @@ Two layouts of the work, both on compiled CasADi code when a C compiler is prese
   corrections (7.9), the last solution of a chunk seeding the next chunk. A point whose
   residual stays above ``tol`` is re-solved by :func:`optkin.forward` (damped Newton, then
   IPOPT) from the previous solution, and tracking resumes from it. The assembly mode is
-  the one of the first point, followed continuously; near a parallel singularity the
-  iteration may cross into another mode without a warning (no det W_p check here: use the
-  guarded path tracking of issue 4 for that). The first call compiles the model's
-  libraries (about 0.5-1.5 s, then cached on disk).
+  the one of the first point, followed continuously as long as no parallel singularity is
+  met. The tracker itself takes no care of singularities: near one, the iteration may
+  cross into another assembly mode or be carried through a fold. So every solved row is
+  then checked against the previous one by a second compiled Function mapped over the
+  rows (:func:`optkin.model.fused.guard_function`): the sign of det W_p, a conditioning
+  indicator, and the distance of the solution from the Euler predictions made at both
+  ends of the step. A sign change, or a solution much farther from the predictions than
+  the predicted move, marks the row in ``BatchResult.crossed`` and the result gets status
+  ``"singular"`` (the vocabulary of :func:`optkin.track`, which stops there; this batch
+  goes on, the rows after a crossing following the mode it led to). The first call
+  compiles the model's libraries (about 0.5-1.5 s, then cached on disk).
 * ``path=False``: the rows are independent; all start from ``guess`` (one guess, or one
   row of unknowns per solve) and the compiled damped Newton step, mapped over ``chunk``
   columns with threads (``Function.map(chunk, "thread", threads)``), iterates until each
@@ -46,7 +53,16 @@ BATCH_DEFAULTS: dict[str, Any] = {
     "max_iter": 40,  # independent rows: damped Newton iterations
     "threads": 1,  # independent rows: threads of the mapped step (2 was slower here)
     "fallback": True,  # re-solve failed points with optkin.forward (Newton, then IPOPT)
+    "guard": True,  # det W_p sign, conditioning and jump checks of every row (see crossed)
+    "jump": 2.0,  # path: mark a row farther from an Euler prediction than jump x its move
+    "near": 1e-3,  # conditioning indicator below which a row is near_singular
 }
+
+#: Rows per call of the mapped guard Function (one compiled library per model).
+GUARD_CHUNK = 64
+#: Scaled distance below which the jump test never fires (round-off, repeated rows); it
+#: grows as 1 / conditioning below 1e-3, where x is ill-determined along the null direction.
+JUMP_FLOOR = 1e-7
 
 
 @dataclass
@@ -66,10 +82,30 @@ class BatchResult:
     nit : ndarray of int (n,)
         Newton iterations (corrections) spent on each row.
     status, message : str
-        ``"optimal"`` when every row closed, else ``"infeasible"``; a sentence.
+        ``"singular"`` when a row is marked in ``crossed``, else ``"optimal"`` when every
+        row closed, else ``"infeasible"``; a sentence naming the first such row.
     stats : SolverStats
         ``extra`` holds ``compiled`` (bool), ``fallback`` (rows re-solved by ``forward``),
-        ``chunks`` (compiled calls) and ``chunk``.
+        ``chunks`` (compiled calls), ``chunk`` and ``guard_time`` (s).
+    det_sign : ndarray of int8 (n,)
+        Sign of det W_p at each closed row (0 at rows that did not close, or without the
+        guard; always +1 when W_p has more rows than columns).
+    conditioning : ndarray (n,)
+        A cheap conditioning indicator of W_p at each closed row, in [0, 1]: the Hadamard
+        ratio |det(W_p S)| / prod_i |row_i(W_p S)| with the columns scaled by the
+        mechanism's size (S = diag(x_scale)); 1 for orthogonal rows, 0 at a parallel
+        singularity; NaN at rows that did not close. It bounds the smallest singular value
+        s of the row-normalised matrix: s^n <= conditioning <= s n^((n-1)/2).
+    crossed : ndarray of bool (n,)
+        ``path=True``: row i is marked when, between the previous closed row and row i,
+        det W_p changes sign (a parallel singularity was crossed), or the solution is
+        farther from the Euler prediction x_prev - W_p^-1 W_a dq_a (W_p, W_a taken at
+        either end of the step) than ``jump`` times the predicted move (it jumped to another solution, or was
+        carried through a fold). Rows from the first marked one on may belong to another
+        assembly mode than row 0: ``np.cumsum(crossed) == 0`` selects the rows known to
+        follow it.
+    near_singular : ndarray of bool (n,)
+        Closed rows with ``conditioning`` below the option ``near``.
     """
 
     x: np.ndarray
@@ -82,6 +118,10 @@ class BatchResult:
     stats: SolverStats = field(default_factory=SolverStats)
     x_names: tuple[str, ...] = ()
     model: Model | None = field(default=None, repr=False)
+    det_sign: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int8))
+    conditioning: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    crossed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    near_singular: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
@@ -90,7 +130,9 @@ class BatchResult:
         n = len(self)
         ok = int(np.sum(self.success))
         worst = float(np.max(self.residual)) if n else 0.0
-        return (f"BatchResult({ok}/{n} closed, status={self.status!r}, "
+        marked = int(np.sum(self.crossed))
+        cross = f", {marked} crossed" if marked else ""
+        return (f"BatchResult({ok}/{n} closed{cross}, status={self.status!r}, "
                 f"max residual={worst:.2e}, solver={self.stats.solver!r})")
 
     @property
@@ -123,7 +165,10 @@ class BatchResult:
             "x": self.x.tolist(), "qa": self.qa.tolist(), "success": self.success.tolist(),
             "residual": self.residual.tolist(), "nit": self.nit.tolist(),
             "status": self.status, "message": self.message, "stats": self.stats.to_dict(),
-            "x_names": list(self.x_names),
+            "x_names": list(self.x_names), "det_sign": self.det_sign.tolist(),
+            "conditioning": [None if not np.isfinite(c) else float(c)
+                             for c in self.conditioning],
+            "crossed": self.crossed.tolist(), "near_singular": self.near_singular.tolist(),
         }
 
 
@@ -186,15 +231,71 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
     A = _as_rows(model, QA)
     tol = float(opts["tol"])
     chunk = max(1, int(opts["chunk"]))
-    if opts["path"]:
-        model.compile(tracker=(chunk, int(opts["iters"])))  # both libraries in parallel
-        return _track(model, A, guess, tol, chunk, int(opts["iters"]), bool(opts["fallback"]))
-    model.compile()
+    path = bool(opts["path"])
+    guard = (path, float(opts["jump"]), float(opts["near"])) if opts["guard"] else None
+    gchunk = GUARD_CHUNK if guard else None
+    if path:
+        # the libraries (core, tracker, guard) are compiled in parallel
+        model.compile(tracker=(chunk, int(opts["iters"])), guard=gchunk)
+        return _track(model, A, guess, tol, chunk, int(opts["iters"]), bool(opts["fallback"]),
+                      guard)
+    model.compile(guard=gchunk)
     return _independent(model, A, guess, tol, chunk, int(opts["max_iter"]),
-                        max(1, int(opts["threads"])), bool(opts["fallback"]))
+                        max(1, int(opts["threads"])), bool(opts["fallback"]), guard)
 
 
-def _finish(model: Model, A, X, R, nit, tol, solver, t0, extra) -> BatchResult:
+def _checks(model: Model, A, X, ok, path: bool, jump: float, near: float):
+    """det W_p signs, conditioning, and the rows where a path crosses a singularity.
+
+    Returns (det_sign, conditioning, crossed, near_singular, prev, why, ratio, det) with
+    ``prev[i]`` the closed row that row i is compared with, ``why[i]`` = 1 (det sign
+    change) or 2 (jump), ``ratio[i]`` the smaller distance of the solution from the two
+    Euler predictions relative to the predicted moves, ``det`` det W_p."""
+    n, na, nx = A.shape[0], model.na, model.nx
+    idx = np.arange(n)
+    if path:  # compare each row with the last closed row before it
+        last = np.maximum.accumulate(np.where(ok, idx, -1))
+        prev = np.r_[-1, last[:-1]] if n else last
+        prev = np.where(prev < 0, idx, prev)
+    else:
+        prev = idx
+    g = GUARD_CHUNK
+    npad = -(-n // g) * g
+    Xc = np.where(np.isfinite(X), X, 0.0)
+    Qp = np.empty((npad, na))
+    Xp = np.empty((npad, nx))
+    Qn = np.empty((npad, na))
+    Xn = np.empty((npad, nx))
+    Qp[:n], Xp[:n], Qn[:n], Xn[:n] = A[prev], Xc[prev], A, Xc
+    Qp[n:], Xp[n:], Qn[n:], Xn[n:] = Qn[n - 1], Xn[n - 1], Qn[n - 1], Xn[n - 1]
+    det = np.empty(npad)
+    h = np.empty(npad)
+    cp = np.empty((npad, 4))
+    f, _ = model.guard(g)
+    ev = FastFn(f)
+    for s in range(0, npad, g):
+        ev.into([Qp[s:s + g], Xp[s:s + g], Qn[s:s + g], Xn[s:s + g]],
+                [det[s:s + g], h[s:s + g], cp[s:s + g]])
+    det, h, cp = det[:n], h[:n], cp[:n]
+    sign = np.where(ok, np.sign(det), 0).astype(np.int8)
+    cond = np.where(ok, h, np.nan)
+    why = np.zeros(n, dtype=np.int8)
+    floor = JUMP_FLOOR * np.maximum(1.0, 1e-3 / np.maximum(np.minimum(h, h[prev]), 1e-300))
+    if path:
+        has = ok & (prev != idx)
+        flip = has & (sign != sign[prev])
+        # a jump: the move disagrees with the Euler predictions of both ends (one end alone
+        # is fooled where the tangent changes fast, e.g. near a serial singularity)
+        jumped = has & (cp[:, 0] > jump * cp[:, 1] + floor) & (cp[:, 2] > jump * cp[:, 3] + floor)
+        why[jumped] = 2
+        why[flip] = 1
+    crossed = why > 0
+    near_s = ok & (h < near)
+    ratio = np.minimum(cp[:, 0] / (cp[:, 1] + floor), cp[:, 2] / (cp[:, 3] + floor))
+    return sign, cond, crossed, near_s, prev, why, ratio, det
+
+
+def _finish(model: Model, A, X, R, nit, tol, solver, t0, extra, guard=None) -> BatchResult:
     ok = np.isfinite(R) & (R <= tol)
     n = A.shape[0]
     nbad = int(n - ok.sum())
@@ -205,11 +306,64 @@ def _finish(model: Model, A, X, R, nit, tol, solver, t0, extra) -> BatchResult:
         first = int(np.flatnonzero(~ok)[0])
         msg = (f"{nbad} of {n} solves did not close (first at row {first}, max |Phi| = "
                f"{R[first]:.2e}); those active joint values may be out of reach")
+    sign = np.zeros(n, dtype=np.int8)
+    cond = np.full(n, np.nan)
+    crossed = np.zeros(n, dtype=bool)
+    near_s = np.zeros(n, dtype=bool)
+    if guard is not None and n:
+        tg = timer()
+        sign, cond, crossed, near_s, prev, why, ratio, det = _checks(model, A, X, ok, *guard)
+        extra["guard_time"] = timer() - tg
+        # the first row that did not close, right after a near-singular row or where det W_p
+        # extrapolated from the two rows before reaches 0: the mode ends at a fold (there
+        # det W_p ~ sqrt(distance to the fold), so det^2 is extrapolated linearly)
+        fold = None
+        f = int(np.flatnonzero(~ok)[0]) if guard[0] and nbad else 0
+        if f > 0:
+            p = f - 1
+            pp = int(prev[p])
+            ahead = False
+            if pp != p:
+                gap = float(np.linalg.norm(A[p] - A[pp]))
+                if gap > 0:
+                    d2, d2p = det[p] ** 2, det[pp] ** 2
+                    r = float(np.linalg.norm(A[f] - A[p])) / gap
+                    ahead = bool(d2 + (d2 - d2p) * r <= 0)
+            if near_s[p] or ahead:
+                fold = f
+        events: list[tuple[int, str]] = []
+        if fold is not None and not crossed[:fold].any():
+            events.append((fold, (
+                f"the assembly mode ends at a parallel singularity between rows {fold - 1} "
+                f"and {fold} of QA (conditioning {cond[fold - 1]:.1e} at row {fold - 1}, "
+                "det W_p heading for 0): two modes merge there (a fold)")))
+        if crossed.any():
+            i = int(np.flatnonzero(crossed)[0])
+            p = int(prev[i])
+            if why[i] == 1:
+                head = (f"det W_p changes sign between rows {p} and {i} of QA: a parallel "
+                        "singularity is crossed there")
+            else:
+                head = (f"the solution at row {i} of QA is {ratio[i]:.3g} times farther from "
+                        f"the Euler predictions than the predicted move from row {p}: it "
+                        "jumped to another solution (near a singularity, or the path steps "
+                        "are too coarse there)")
+            k = int(crossed.sum())
+            low = np.where(ok, cond, np.inf)
+            j = int(np.argmin(low))
+            events.append((i, (
+                f"{head}; the rows from {i} on may belong to another assembly mode "
+                f"({k} row{'s' if k > 1 else ''} marked in crossed; conditioning "
+                f"{low[j]:.1e} at row {j})")))
+        if events:
+            msg = ". ".join(t for _, t in sorted(events)) + ". " + msg
+            status = "singular"
     stats = SolverStats(solver, 0.0, timer() - t0, int(nit.sum()), status, extra)
-    return BatchResult(X, A, ok, R, nit, status, msg, stats, tuple(model.x_names), model)
+    return BatchResult(X, A, ok, R, nit, status, msg, stats, tuple(model.x_names), model,
+                       sign, cond, crossed, near_s)
 
 
-def _track(model: Model, A, guess, tol, chunk, iters, fallback) -> BatchResult:
+def _track(model: Model, A, guess, tol, chunk, iters, fallback, guard=None) -> BatchResult:
     t0 = timer()
     n, na, nx = A.shape[0], model.na, model.nx
     X = np.full((n, nx), np.nan)
@@ -254,10 +408,11 @@ def _track(model: Model, A, guess, tol, chunk, iters, fallback) -> BatchResult:
     extra = {"compiled": compiled, "fallback": nfall, "chunks": calls, "chunk": chunk,
              "iters": iters, "path": True}
     return _finish(model, A, X, R, nit, tol, "compiled-track" if compiled else "track", t0,
-                   extra)
+                   extra, guard)
 
 
-def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback) -> BatchResult:
+def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback,
+                 guard=None) -> BatchResult:
     t0 = timer()
     n, nx = A.shape[0], model.nx
     g = None if guess is None or isinstance(guess, KinResult) else np.asarray(guess, dtype=float)
@@ -316,4 +471,4 @@ def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback
     extra = {"compiled": compiled, "fallback": nfall, "chunks": calls, "chunk": chunk,
              "threads": threads, "path": False}
     return _finish(model, A, X, R, nit, tol, "compiled-newton" if compiled else "newton", t0,
-                   extra)
+                   extra, guard)
