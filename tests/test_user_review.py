@@ -135,7 +135,7 @@ def test_dof_rejects_bad_arguments(kw, word):
                                 {"second_order_tol": None}])
 def test_classify_rejects_bad_option_values(rpr3, closed, kw):
     name = next(iter(kw))
-    with pytest.raises(MechanismError, match=rf"classify: option {name} must be a positive"):
+    with pytest.raises(MechanismError, match=rf"classify: option {name} must be a (positive )?number"):
         optkin.classify(rpr3, closed, **kw)
 
 
@@ -354,3 +354,72 @@ def test_capability_polygon_at_three_directions_matches_virtual_work(rpr3, close
     D = np.column_stack([np.cos(th), np.sin(th), np.zeros(3)])
     expected = [1.0 / np.max(np.abs(J.T @ d)) for d in D]
     assert poly.success and np.allclose(poly.max, expected, rtol=1e-6)
+
+
+# ---------------------------------------------------------------------------
+# option values: numbers where numbers are expected
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("call, where, name", [
+    (lambda m, s: optkin.assembly_modes(m, s.qa, tol="tight"), "assembly_modes", "tol"),
+    (lambda m, s: optkin.assembly_modes(m, s.qa, time_limit=-1), "assembly_modes", "time_limit"),
+    (lambda m, s: optkin.assembly_modes(m, s.qa, target="low"), "assembly_modes", "target"),
+    (lambda m, s: optkin.track(m, [s.qa, s.qa * 1.01], guess=s, max_iter="8"), "track",
+     "max_iter"),
+    (lambda m, s: optkin.track(m, [s.qa, s.qa * 1.01], guess=s, cond_max=np.nan), "track",
+     "cond_max"),
+    (lambda m, s: optkin.inverse(m, [0.45, 0.35, 0.1], tol=-1e-9), "inverse", "tol"),
+    (lambda m, s: statics.capability(m, s, 1.0, dir_tol="x"), "capability", "dir_tol"),
+    (lambda m, s: statics.distribute(m, s, [0, -1, 0], sing_tol=-1), "distribute", "sing_tol"),
+], ids=lambda v: v if isinstance(v, str) else "")
+def test_numeric_options_reject_non_numbers_and_negatives(rpr3, closed, call, where, name):
+    with pytest.raises(MechanismError, match=rf"^{where}: option {name} must be a number >= 0"):
+        call(rpr3, closed)
+
+
+def test_inverse_of_a_khalil_mechanism_needs_at_least_one_start():
+    sr = M.sr400()
+    q = optkin.forward(sr, [0.3, -0.4, 0.2, 0.5, 0.4, 0.6], guess=[np.pi / 2 + 1, -1, np.pi + 1])
+    with pytest.raises(MechanismError, match=r"inverse: option starts must be an integer >= 1"):
+        optkin.inverse(sr, q.pose, starts=0)
+    with pytest.raises(MechanismError, match=r"inverse: option seed must be an integer"):
+        optkin.inverse(sr, q.pose, seed=0.5)
+
+
+def test_assembly_modes_seed_and_width_are_checked(rpr3, closed):
+    with pytest.raises(MechanismError, match=r"assembly_modes: seed must be an integer >= 0"):
+        optkin.assembly_modes(rpr3, closed.qa, seed=-1)
+    with pytest.raises(MechanismError, match=r"assembly_modes: option width must be a power of 2"):
+        optkin.assembly_modes(rpr3, closed.qa, width=3)
+
+
+def test_jacobians_tol_is_checked(rpr3, closed):
+    with pytest.raises(MechanismError, match=r"jacobians: tol must be a positive number"):
+        optkin.jacobians(rpr3, closed, tol="1e-8")
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"grid": -1}, r"^grid: expected an integer >= 2"),
+    ({"grid": 2.5}, r"^grid: expected an integer >= 2"),
+    ({"step": 0.0}, r"^step: expected a number > 0"),
+    ({"tol": "small"}, r"^tol: expected a number > 0"),
+    ({"max_steps": 0}, r"^max_steps: expected an integer >= 1"),
+    ({"bounds": "a"}, r"^bounds: expected \[\[lo, hi\], \[lo, hi\]\]"),
+    ({"bounds": [[1, 0], [0, 1]]}, r"^bounds: expected \[\[lo, hi\], \[lo, hi\]\]"),
+])
+def test_singular_curves_rejects_bad_arguments(kw, match):
+    with pytest.raises(MechanismError, match=match):
+        optkin.singular_curves(M.five_bar(9, 8, 5, 5, 8), **kw)
+
+
+@pytest.mark.parametrize("fn", ["aspects", "workspace"])
+@pytest.mark.parametrize("kw, match", [
+    ({"qa_grid": 0}, r"^qa_grid: expected an integer >= 2"),
+    ({"bounds": [[0, 1]]}, r"^bounds: expected"),
+    ({"limits": {"L1.theta1": (1.0, 0.0)}}, r"^limits\['L1.theta1'\]: expected a pair"),
+    ({"limits": {"L1.theta1": "wide"}}, r"^limits\['L1.theta1'\]: expected a pair"),
+])
+def test_aspects_and_workspace_reject_bad_arguments(fn, kw, match):
+    with pytest.raises(MechanismError, match=match):
+        getattr(optkin, fn)(M.five_bar(9, 8, 5, 5, 8), **kw)

@@ -38,6 +38,7 @@ from .continuation import (
     _full_from_x,
     _split_wrapped,
     augmented_system,
+    check_number,
     singular_curves,
 )
 from .planar import Face, faces
@@ -304,11 +305,18 @@ def _check_plane(mech: Mechanism, fixed: Mapping[str, float] | None):
 
 def _limit_map(mech, names, limits):
     out = {}
-    for k, (lo, hi) in dict(limits or {}).items():
+    for k, pair in dict(limits or {}).items():
         if k not in names[: get_model(mech).na]:
             raise MechanismError(f"limits: {k!r} is not an actuated joint of {mech.name}; "
                                  f"known: {', '.join(mech.active_names)}")
-        out[names.index(k)] = (float(lo), float(hi))
+        try:
+            lo, hi = (float(v) for v in pair)
+        except (TypeError, ValueError):
+            lo = hi = float("nan")
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+            raise MechanismError(f"limits[{k!r}]: expected a pair (lo, hi) of finite numbers with "
+                                 f"lo < hi, got {pair!r}")
+        out[names.index(k)] = (lo, hi)
     return out
 
 
@@ -376,6 +384,7 @@ def aspects(
     """
     t0 = time.perf_counter()
     fixed, names = _check_plane(mech, fixed)
+    check_number("qa_grid", qa_grid, integer=True, low=2)
     lim_map = _limit_map(mech, names, limits)
     model = get_model(mech)
     kinds = ["parallel", "serial"] + (["limit"] if lim_map else [])
@@ -567,6 +576,7 @@ def workspace(
     """
     t0 = time.perf_counter()
     fixed, names = _check_plane(mech, fixed)
+    check_number("qa_grid", qa_grid, integer=True, low=2)
     lim_map = _limit_map(mech, names, limits)
     model = get_model(mech)
     kinds = ["serial"] + (["limit"] if lim_map else [])

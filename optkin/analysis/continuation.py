@@ -1013,6 +1013,10 @@ def singular_curves(
     t0 = time.perf_counter()
     if not isinstance(mech, Mechanism):
         raise MechanismError(f"expected an optkin Mechanism, got {type(mech).__name__}")
+    check_number("grid", grid, integer=True, low=2, optional=True)
+    check_number("step", step, low=0.0, strict=True, optional=True)
+    check_number("tol", tol, low=0.0, strict=True)
+    check_number("max_steps", max_steps, integer=True, low=1)
     model = get_model(mech)
     names = _names_of(mech)
     fixed = dict(fixed or {})
@@ -1072,7 +1076,14 @@ def singular_curves(
                 bx.append((0.0, 3.0 * model.length))
         bounds_arr = np.array(bx, dtype=float)
     else:
-        bounds_arr = np.asarray(bounds, dtype=float).reshape(2, 2)
+        try:
+            bounds_arr = np.asarray(bounds, dtype=float).reshape(2, 2)
+        except (TypeError, ValueError):
+            bounds_arr = np.full((2, 2), np.nan)
+        if not (np.all(np.isfinite(bounds_arr)) and np.all(bounds_arr[:, 0] < bounds_arr[:, 1])):
+            raise MechanismError(
+                f"bounds: expected [[lo, hi], [lo, hi]] with lo < hi for the plane {plane!r}, "
+                f"got {bounds!r}")
     bounds_full = {pidx[0]: tuple(bounds_arr[0]), pidx[1]: tuple(bounds_arr[1])}
     rng = np.random.default_rng(0)
     curves: list[Curve] = []
@@ -1246,3 +1257,20 @@ def _cusps_on(tr: _Tracer, c: Curve, pidx, fixed_idx, fixed_map) -> list[np.ndar
         if not any(np.linalg.norm(v - o) < 1e-6 for o in out):
             out.append(v)
     return out
+
+
+def check_number(name: str, v: Any, *, integer: bool = False, low: float = 0.0,
+                 strict: bool = False, optional: bool = False) -> None:
+    """Raise a MechanismError naming ``name`` unless ``v`` is a finite number >= ``low``.
+
+    ``strict``: > ``low``; ``integer``: a whole number; ``optional``: None is accepted.
+    """
+    if v is None and optional:
+        return
+    ok = (isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+          and bool(np.isfinite(v)) and (v > low if strict else v >= low)
+          and (not integer or float(v).is_integer()))
+    if not ok:
+        what = "an integer" if integer else "a number"
+        rel = ">" if strict else ">="
+        raise MechanismError(f"{name}: expected {what} {rel} {low:g}, got {v!r}")

@@ -290,6 +290,9 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
     >>> np.round(jac.W @ [0, 1, 0, 0, 0, 0], 12).tolist()   # [7.41]: theta3dot = -theta2dot
     [-1.0, 1.0]
     """
+    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)) or not (
+            np.isfinite(tol) and tol > 0):
+        raise MechanismError(f"jacobians: tol must be a positive number (default 1e-8), got {tol!r}")
     model = get_model(mech)
     f = analysis_functions(mech)
     qv, qa, x = config_of(mech, q)

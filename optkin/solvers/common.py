@@ -18,7 +18,12 @@ __all__ = ["merge_options", "check_qa", "check_mechanism", "newton", "make_resul
 
 
 def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: str) -> dict[str, Any]:
-    """Merge keyword options over defaults; unknown names warn and are ignored."""
+    """Merge keyword options over defaults; unknown names warn and are ignored.
+
+    An option whose default is a number (tolerances, counts, limits, seeds) must be given
+    a number >= 0 (inf allowed, e.g. to disable a limit), else a :class:`MechanismError`
+    names the option and its default.
+    """
     out = dict(defaults)
     for k, v in given.items():
         if k not in defaults:
@@ -27,6 +32,12 @@ def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: 
                 stacklevel=3,
             )
             continue
+        d = defaults[k]
+        if isinstance(d, (int, float)) and not isinstance(d, bool) and not (
+                isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+                and v >= 0):  # NaN fails v >= 0
+            raise MechanismError(
+                f"{where}: option {k} must be a number >= 0 (default {d!r}), got {v!r}")
         out[k] = v
     return out
 

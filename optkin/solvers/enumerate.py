@@ -499,6 +499,8 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     (2, True)
     """
     opts = merge_options(ASSEMBLY_DEFAULTS, options, "assembly_modes")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise MechanismError(f"assembly_modes: seed must be an integer >= 0, got {seed!r}")
     model = get_model(mech)
     qa = check_qa(model, qa)
     t_start = timer()
@@ -512,7 +514,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         width = 64 if small else 256
     width = int(width)
     if width < 1 or width & (width - 1):
-        raise ValueError(f"assembly_modes: width must be a power of 2, got {width}")
+        raise MechanismError(f"assembly_modes: option width must be a power of 2 or 'auto', got {width}")
     jit = opts["jit"]
     if jit == "auto":
         jit = "cached" if small else True

@@ -63,6 +63,11 @@ def inverse(mech: Mechanism, pose: Any, **options: Any) -> SolutionSet:
     4
     """
     opts = merge_options(INVERSE_DEFAULTS, options, "inverse")
+    for k in ("starts", "iters", "seed"):
+        if not float(opts[k]).is_integer() or (k == "starts" and opts[k] < 1):
+            raise MechanismError(
+                f"inverse: option {k} must be an integer{' >= 1' if k == 'starts' else ' >= 0'} "
+                f"(default {INVERSE_DEFAULTS[k]!r}), got {opts[k]!r}")
     model = get_model(mech)
     T = as_pose(mech, pose)
     if mech.kind == "legs":
