@@ -202,6 +202,10 @@ def _cmd_show(args: argparse.Namespace) -> int:
             return EXIT_FAILED
         what = res
     out = Path(args.out) if args.out else path.with_suffix(".png")
+    if out.is_dir():  # -o DIR: the picture goes into it, named after the problem file
+        out = out / path.with_suffix(".png").name
+    elif not out.suffix:  # matplotlib appends .png: report the file actually written
+        out = out.with_suffix(".png")
     out.parent.mkdir(parents=True, exist_ok=True)
     draw(mech, what, str(out))
     print(f"{path.name}: wrote {out}")
@@ -236,6 +240,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except BrokenPipeError:
         return EXIT_FAILED
+    except OSError as e:  # an output path that cannot be created or written
+        where = f": {e.filename}" if getattr(e, "filename", None) else ""
+        _err(f"optkin: cannot write the output ({e.strerror or e}{where}); choose another "
+             "path with --out")
+        return EXIT_INVALID
     parser.error(f"unknown command {args.command!r}")
     return EXIT_INVALID
 

@@ -423,3 +423,34 @@ def test_singular_curves_rejects_bad_arguments(kw, match):
 def test_aspects_and_workspace_reject_bad_arguments(fn, kw, match):
     with pytest.raises(MechanismError, match=match):
         getattr(optkin, fn)(M.five_bar(9, 8, 5, 5, 8), **kw)
+
+
+# ---------------------------------------------------------------------------
+# CLI: output paths
+# ---------------------------------------------------------------------------
+
+
+def test_show_into_a_directory_or_without_suffix_reports_the_file_written(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    d = tmp_path / "pics"
+    d.mkdir()
+    assert main(["show", str(PROBLEMS / "four_bar.toml"), "--out", str(d)]) == 0
+    assert (d / "four_bar.png").read_bytes()[:4] == b"\x89PNG"
+    assert f"wrote {d / 'four_bar.png'}" in capsys.readouterr().out
+    assert main(["show", str(PROBLEMS / "four_bar.toml"), "--out", str(tmp_path / "pic")]) == 0
+    assert (tmp_path / "pic.png").exists()
+    assert f"wrote {tmp_path / 'pic.png'}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", ["show", "run"])
+def test_unwritable_output_exits_2_without_traceback(tmp_path, capsys, command):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("in the way\n")
+    out = blocker / "sub" / ("x.png" if command == "show" else "results")
+    args = [command, str(PROBLEMS / "four_bar.toml"), "--out", str(out)]
+    if command == "run":
+        args.append("--no-pictures")
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "optkin: cannot write the output" in err and "--out" in err
+    assert "Traceback" not in err
