@@ -71,6 +71,21 @@ def rpr3(base: Any, platform: Any, home: Sequence[float] | None = None) -> Mecha
 
     q_a = the three leg lengths; the pose is the platform frame (x, y, phi).
 
+    Parameters
+    ----------
+    base : array (3, 2)
+        Base joint centres A_i.
+    platform : array (3, 2)
+        Platform joint centres B_i in the platform frame.
+    home : sequence of 3 floats, optional
+        Task coordinates (x, y, phi) used as the default guess of :func:`optkin.forward`.
+
+    Returns
+    -------
+    Mechanism
+
+    Examples
+    --------
     >>> m = rpr3([[0, 0], [1, 0], [0, 1]], [[0, 0], [0.2, 0], [0, 0.2]])
     >>> m.active_names
     ('L1.rho', 'L2.rho', 'L3.rho')
@@ -88,6 +103,21 @@ def rpr4(base: Any, platform: Any, home: Sequence[float] | None = None) -> Mecha
     lengths (they must be consistent for the platform to close: the direct model solves
     the four closure rows in the least-squares sense). ``mech.redundant`` is True.
 
+    Parameters
+    ----------
+    base : array (4, 2)
+        Base joint centres.
+    platform : array (4, 2)
+        Platform joint centres in the platform frame.
+    home : sequence of 3 floats, optional
+        Task coordinates (x, y, phi) of the default guess.
+
+    Returns
+    -------
+    Mechanism
+
+    Examples
+    --------
     >>> m = rpr4([[0, 0], [1, 0], [1, 1], [0, 1]], [[-0.1, -0.1], [0.1, -0.1], [0.1, 0.1], [-0.1, 0.1]])
     >>> m.dof, m.n_actuated, m.redundant
     (3, 4, True)
@@ -101,7 +131,29 @@ def rpr4(base: Any, platform: Any, home: Sequence[float] | None = None) -> Mecha
 def rrr3(
     base: Any, platform: Any, proximal: Any, distal: Any, home: Sequence[float] | None = None
 ) -> Mechanism:
-    """Planar 3-RRR with actuated base revolutes; link lengths scalars or one per leg."""
+    """Planar 3-RRR with actuated base revolutes; link lengths scalars or one per leg.
+
+    Parameters
+    ----------
+    base : array (3, 2)
+        Actuated base revolutes.
+    platform : array (3, 2)
+        Platform revolutes in the platform frame.
+    proximal, distal : float or 3 floats
+        Lengths of the base-side and platform-side links (positive).
+    home : sequence of 3 floats, optional
+        Task coordinates (x, y, phi) of the default guess.
+
+    Returns
+    -------
+    Mechanism
+
+    Examples
+    --------
+    >>> m = rrr3([[0, 0], [1, 0], [0.5, 0.9]], [[-0.1, -0.05], [0.1, -0.05], [0, 0.1]], 0.4, 0.4)
+    >>> m.active_names
+    ('L1.theta1', 'L2.theta1', 'L3.theta1')
+    """
     b = _points(base, (3, 2), "base")
     p = _points(platform, (3, 2), "platform")
     l1 = _lengths(proximal, 3, "proximal")
@@ -118,6 +170,24 @@ def five_bar(L0: float, L1: float, L2: float, L3: float, L4: float) -> Mechanism
 
     Base joints A = (0, 0) and B = (L0, 0); |AC| = L1, |CP| = L2, |PD| = L3, |DB| = L4;
     q_a = (theta1 at A, theta2 at B), angles from the x axis; the end effector is P.
+
+    Parameters
+    ----------
+    L0, L1, L2, L3, L4 : float
+        Positive lengths |AB|, |AC|, |CP|, |PD|, |DB|.
+
+    Returns
+    -------
+    Mechanism
+
+    Examples
+    --------
+    P = (4.5, 6) is at distance 7.5 < L1 + L2 from A and B: two elbows per leg.
+
+    >>> import optkin
+    >>> m = five_bar(9, 8, 5, 5, 8)
+    >>> m.active_names, len(optkin.inverse(m, [4.5, 6.0]))
+    (('L1.theta1', 'L2.theta1'), 4)
     """
     L0 = _positive("L0", L0)
     L1, L2, L3, L4 = (_positive(n, v) for n, v in zip(("L1", "L2", "L3", "L4"), (L1, L2, L3, L4)))
@@ -137,6 +207,26 @@ def four_bar(L1: float, L2: float, L3: float, L4: float) -> Mechanism:
     coupler L2; rocker L3 at D at absolute angle ``phi``. The loop is cut at the
     coupler-rocker joint (frame 4, partner frame 5 on the rocker). End effector: the rocker
     frame (task ``rz``, so ``inverse`` gives the crank angles for a rocker angle).
+
+    Parameters
+    ----------
+    L1, L2, L3, L4 : float
+        Positive lengths of the crank, coupler, rocker and ground.
+
+    Returns
+    -------
+    Mechanism
+
+    Examples
+    --------
+    Crank at 1 rad: the rocker tip is on two circles; the open mode has phi = 1.7275693...
+    (problems/four_bar.toml).
+
+    >>> import optkin
+    >>> m = four_bar(1.0, 2.0, 2.0, 2.5)
+    >>> r = optkin.forward(m, [1.0])
+    >>> m.joint_names, round(float(r.q[2]), 6)
+    (('theta', 'theta2', 'phi', 'theta4'), 1.727569)
     """
     L1, L2, L3, L4 = (_positive(n, v) for n, v in zip(("L1", "L2", "L3", "L4"), (L1, L2, L3, L4)))
     rows = [
@@ -156,6 +246,28 @@ def stewart_gough(base: Any, platform: Any, home: Sequence[float] | None = None)
     """6-6 Stewart-Gough platform (6-UPS): base (6, 3), platform (6, 3) in the platform frame.
 
     q_a = the six leg lengths; pose (x, y, z, roll, pitch, yaw).
+
+    Parameters
+    ----------
+    base : array (6, 3)
+        Base U-joint centres.
+    platform : array (6, 3)
+        Platform S-joint centres in the platform frame.
+    home : sequence of 6 floats, optional
+        Task coordinates of the default guess.
+
+    Returns
+    -------
+    Mechanism
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> a = np.linspace(0, 2 * np.pi, 7)[:-1]
+    >>> b = np.c_[np.cos(a), np.sin(a), 0 * a]
+    >>> m = stewart_gough(b, 0.5 * np.c_[np.cos(a + 0.3), np.sin(a + 0.3), 0 * a])
+    >>> m.dof, m.task
+    (6, ('x', 'y', 'z', 'roll', 'pitch', 'yaw'))
     """
     b = _points(base, (6, 3), "base")
     p = _points(platform, (6, 3), "platform")
@@ -176,6 +288,23 @@ def delta(
     for theta > 0. Each parallelogram forearm (length ``lower``) is modelled as S-S pairs
     that keep the platform parallel to the base, so the platform translates (x, y, z); its
     joint i sits at ``platform_radius`` (cos a_i, sin a_i, 0).
+
+    Parameters
+    ----------
+    base_radius, platform_radius : float
+        Radii of the base revolutes and of the platform joints (positive).
+    upper, lower : float
+        Lengths of the arms and of the parallelogram forearms (positive).
+
+    Returns
+    -------
+    Mechanism
+
+    Examples
+    --------
+    >>> m = delta()
+    >>> m.dof, m.task, m.active_names
+    (3, ('x', 'y', 'z'), ('L1.theta', 'L2.theta', 'L3.theta'))
     """
     Rb = _positive("base_radius", base_radius)
     rp = _positive("platform_radius", platform_radius)
@@ -206,6 +335,21 @@ def sr400(
 
     d9 = d3 and d10 = -d8 as in the table; the loop is cut at joint 9 (frames 9 and 10).
     The end effector is frame 6.
+
+    Parameters
+    ----------
+    d2, d3, d4, d8, rl4 : float
+        The lengths of Table 7.1 (finite).
+
+    Returns
+    -------
+    Mechanism
+
+    Examples
+    --------
+    >>> m = sr400()
+    >>> m.dof, m.active_names
+    (6, ('theta1', 'theta2', 'theta4', 'theta5', 'theta6', 'theta7'))
     """
     params = {"d2": _finite("d2", d2), "d3": _finite("d3", d3), "d4": _finite("d4", d4),
               "d8": _finite("d8", d8), "RL4": _finite("rl4", rl4)}
@@ -242,6 +386,23 @@ def akr3000(
     Active: theta1, r5, r6 (the two cylinders), theta8, theta9, theta10; passive theta2,
     theta3, theta4, theta7; cut joints theta11 (loop of links 5 and 7) and theta12 (loop of
     links 2 and 6), partner frames 13 and 14. End effector: frame 10.
+
+    Parameters
+    ----------
+    d3, d4, d7, r8, d13, d14 : float
+        The lengths of Table 7.2 (finite).
+    gamma13, gamma14 : float
+        The angles gamma of the partner frames 13 and 14 (rad).
+
+    Returns
+    -------
+    Mechanism
+
+    Examples
+    --------
+    >>> m = akr3000()
+    >>> m.dof, m.active_names, len(m.joint_names)
+    (6, ('theta1', 'r5', 'r6', 'theta8', 'theta9', 'theta10'), 12)
     """
     params = {k: _finite(k, v) for k, v in dict(d3=d3, d4=d4, d7=d7, r8=r8, d13=d13, d14=d14,
                                                 g13=gamma13, g14=gamma14).items()}
