@@ -406,8 +406,8 @@ class Model:
         return f, f"guard:{self.mech.key}:{int(chunk)}:{body}"
 
     def guard(self, chunk: int) -> tuple[ca.Function, bool]:
-        """The checks of ``forward_batch`` (det W_p, conditioning, distance to the Euler
-        predictions; :func:`optkin.model.fused.guard_function`) mapped over ``chunk`` rows,
+        """What ``forward_batch`` checks its rows with (det W_p, conditioning,
+        W_p^-1 W_a; :func:`optkin.model.fused.guard_function`) mapped over ``chunk`` rows,
         and whether it is compiled."""
         f = self._guard.get(int(chunk))
         if f is None:

@@ -9,9 +9,9 @@ q_a,prev, the Euler predictor x_prev - W_p^-1 W_a (q_a - q_a,prev) (the velocity
 [7.51]) followed by ``iters`` Newton corrections (7.9); returns the new x, q_a (the
 accumulated state of ``mapaccum``) and max |Phi|.
 
-``guard_function(model)``: the checks of a path point against the previous one (det W_p,
-a conditioning indicator, and how far the solution is from the Euler predictions), mapped
-over the rows of a batch by :func:`optkin.forward_batch`.
+``guard_function(model)``: what a path point is checked with against the previous one
+(det W_p, a conditioning indicator, and the Euler predictions of the steps to and from it),
+mapped over the rows of a batch by :func:`optkin.forward_batch`.
 """
 
 from __future__ import annotations
@@ -137,87 +137,108 @@ def tracker_function(model, iters: int = 2) -> ca.Function:
                        ["x_prev", "qa_prev", "qa"], ["x", "qa_next", "res"])
 
 
-def det_lu(M) -> ca.SX:
-    """det M of a square SX matrix by Gaussian elimination with partial pivoting, unrolled
-    (row swaps as ``if_else``): O(n^3) operations where ``casadi.det`` expands cofactors
-    (8384 instructions for the 7x7 W_p of a Stewart-Gough platform, about 900 here)."""
+def det_solve(M, B=None):
+    """(det M, M^-1 B) of a square SX matrix by Householder QR, unrolled.
+
+    Branch-free apart from the sign of each reflection (``casadi.det`` expands cofactors:
+    8384 instructions for the 7x7 W_p of a Stewart-Gough platform; a pivoted LU written
+    with ``if_else`` row swaps ran 2.3x slower than this when compiled). Every reflection
+    H = I - 2 v v^T / v^T v has det -1, so det M = (-1)^(reflections) prod R_kk.
+    """
     n = M.shape[0]
-    A = [[M[i, j] for j in range(n)] for i in range(n)]
+    k_b = 0 if B is None else B.shape[1]
+    A = [[M[i, j] for j in range(n)] + [B[i, j] for j in range(k_b)] for i in range(n)]
+    w = n + k_b
     det = ca.SX(1)
+    for k in range(n - 1):
+        x = [A[i][k] for i in range(k, n)]
+        nrm = ca.sqrt(sum(xi * xi for xi in x))
+        sgn = ca.if_else(x[0] >= 0, 1, -1)
+        v = [x[0] + sgn * nrm] + x[1:]
+        vtv = sum(vi * vi for vi in v)
+        beta = ca.if_else(vtv > 0, 2 / vtv, 0)
+        det = ca.if_else(vtv > 0, -det, det)
+        for j in range(k, w):
+            f = beta * sum(v[i] * A[k + i][j] for i in range(len(v)))
+            for i in range(len(v)):
+                A[k + i][j] = A[k + i][j] - f * v[i]
     for k in range(n):
-        for i in range(k + 1, n):  # bring the largest |A[i][k]| to row k
-            swap = ca.fabs(A[i][k]) > ca.fabs(A[k][k])
-            for j in range(k, n):
-                a, b = A[k][j], A[i][j]
-                A[k][j] = ca.if_else(swap, b, a)
-                A[i][j] = ca.if_else(swap, a, b)
-            det = ca.if_else(swap, -det, det)
-        piv = A[k][k]
-        det = det * piv
-        inv = ca.if_else(piv == 0, 0, 1 / piv)
-        for i in range(k + 1, n):
-            f = A[i][k] * inv
-            for j in range(k + 1, n):
-                A[i][j] = A[i][j] - f * A[k][j]
-    return det
+        det = det * A[k][k]
+    if not k_b:
+        return det, None
+    X = [[None] * k_b for _ in range(n)]
+    for i in range(n - 1, -1, -1):  # back substitution with R
+        inv = ca.if_else(A[i][i] == 0, 0, 1 / A[i][i])
+        for j in range(k_b):
+            v = A[i][n + j]
+            for c in range(i + 1, n):
+                v = v - A[i][c] * X[c][j]
+            X[i][j] = v * inv
+    return det, ca.vertcat(*[ca.horzcat(*row) for row in X])
+
+
+def det_sx(M) -> ca.SX:
+    """det M of a square SX matrix (:func:`det_solve`)."""
+    return det_solve(M)[0]
 
 
 def guard_function(model) -> ca.Function:
-    """The checks of one path point against the previous one.
+    """What :func:`optkin.forward_batch` checks at every solved row of a path.
 
-    Inputs (qa_prev, x_prev, qa, x); outputs
+    Inputs (qa_prev, x_prev, qa, x, qa_next, x_next): the row and its neighbours on the
+    path (the row itself where there is none); outputs
 
     * ``det``: det W_p(q_a, x) (square W_p; 1 when W_p has more rows than columns, which has
       no orientation);
     * ``h``: a conditioning indicator in [0, 1], the Hadamard ratio of W_p with columns
       scaled by ``x_scale``: |det(W_p S)| / prod_i |row_i(W_p S)| (rows normalised first and
       sqrt det(N^T N) for a non-square W_p). 1 for orthogonal rows, 0 at a singularity;
-      invariant to the scaling of the rows; sigma_min^n <= h <= sigma_min n^((n-1)/2) for the
-      row-normalised matrix;
-    * ``cp`` = [corr_prev, pred_prev, corr_here, pred_here]: at each end of the step, the
-      distance |x - x_prev - dx| of the solution from the Euler prediction and the
-      predicted move |dx|, dx = -W_p^-1 W_a (q_a - q_a,prev) (the velocity model [7.51]
-      with W_p, W_a taken at (q_a,prev, x_prev), resp. at (q_a, x)), in the max norm of scaled
-      units (lengths / ``x_scale``, angle differences wrapped). Along a smooth branch the
-      distances are second order in the step; a jump to another solution makes one of
-      them as large as the move itself.
+      invariant to the scaling of the rows; s^n <= h <= s n^((n-1)/2) with s the smallest
+      singular value of the row-normalised matrix;
+    * ``cp`` = [c_back, p_back, c_fwd, p_fwd]: the Euler predictions dx = -W_p^-1 W_a dq_a
+      (the velocity model [7.51], W_p and W_a at this row) of the step from the previous
+      row (back) and of the step to the next row (fwd): the predicted move |dx| (p_) and
+      the distance of the actual move from it (c_), both in the max norm of scaled units
+      (lengths / ``x_scale``, angle differences wrapped). Along a smooth branch the
+      distances are second order in the step; a jump to another solution makes them as
+      large as the move itself.
+
+    det and W_p^-1 W_a dq_a come from one Householder QR factorisation (:func:`det_solve`).
     """
     nx, na, m = model.nx, model.na, model.m
-    square = m == nx
     scale = np.asarray(model.x_scale, dtype=float)
     angle = np.asarray(model.x_angle, dtype=bool)
-    xp = ca.SX.sym("x_prev", nx)
-    qp = ca.SX.sym("qa_prev", na)
-    x = ca.SX.sym("x", nx)
-    qa = ca.SX.sym("qa", na)
-    f = ca.Function("f", [model.qa_sym, model.x_sym],
-                    [ca.jacobian(model.phi_sym, model.x_sym),
-                     ca.jacobian(model.phi_sym, model.qa_sym)])
-    Wp0, Wa0 = f(qp, xp)
-    Wp1, Wa1 = f(qa, x)
-    dq = qa - qp
-    d = x - xp
-    tau = 2 * np.pi
-    d = ca.vertcat(*[d[i] - tau * ca.floor(d[i] / tau + 0.5) if angle[i] else d[i]
-                     for i in range(nx)])
-    dx0 = _newton_dx(Wp0, ca.mtimes(Wa0, dq), square)  # predicted from the previous point
-    dx1 = _newton_dx(Wp1, ca.mtimes(Wa1, dq), square)  # predicted back from this point
-    sc = ca.DM(1.0 / scale)
-
-    def mx(v):
-        return ca.mmax(ca.fabs(v * sc))
-
-    cp = ca.vertcat(mx(d - dx0), mx(dx0), mx(d - dx1), mx(dx1))
-    Ws = ca.mtimes(Wp1, ca.diag(ca.DM(scale)))
+    qa, x = model.qa_sym, model.x_sym
+    qp, xp = ca.SX.sym("qa_prev", na), ca.SX.sym("x_prev", nx)
+    qn, xn = ca.SX.sym("qa_next", na), ca.SX.sym("x_next", nx)
+    Wp = ca.jacobian(model.phi_sym, x)
+    Wa = ca.jacobian(model.phi_sym, qa)
+    rhs = ca.mtimes(Wa, ca.horzcat(qa - qp, qn - qa))
+    Ws = ca.mtimes(Wp, ca.diag(ca.DM(scale)))
     rn = ca.sqrt(ca.sum2(Ws * Ws)) + 1e-300
-    if square:  # det(W_p S) / prod |rows| = det W_p prod(S) / prod |rows|
-        det = det_lu(Wp1)
+    if m == nx:  # det(W_p S) / prod |rows| = det W_p prod(S) / prod |rows|
+        det, D = det_solve(Wp, rhs)
         h = ca.fabs(det) * float(np.prod(scale))
         for i in range(m):
             h = h / rn[i]
     else:
         N = Ws / ca.repmat(rn, 1, nx)
         det = ca.SX(1)
-        h = ca.sqrt(ca.fmax(det_lu(ca.mtimes(N.T, N)), 0))
-    return ca.Function("guard", [qp, xp, qa, x], [det, h, cp],
-                       ["qa_prev", "x_prev", "qa", "x"], ["det", "h", "cp"])
+        h = ca.sqrt(ca.fmax(det_sx(ca.mtimes(N.T, N)), 0))
+        D = ca.solve(ca.mtimes(Wp.T, Wp), ca.mtimes(Wp.T, rhs))
+    tau = 2 * np.pi
+    sc = ca.DM(1.0 / scale)
+
+    def move(a, b):  # b - a, angles wrapped
+        d = b - a
+        return ca.vertcat(*[d[i] - tau * ca.floor(d[i] / tau + 0.5) if angle[i] else d[i]
+                            for i in range(nx)])
+
+    def mx(v):
+        return ca.mmax(ca.fabs(v * sc))
+
+    db, df = -D[:, 0], -D[:, 1]
+    cp = ca.vertcat(mx(move(xp, x) - db), mx(db), mx(move(x, xn) - df), mx(df))
+    return ca.Function("guard", [qp, xp, qa, x, qn, xn], [det, h, cp],
+                       ["qa_prev", "x_prev", "qa", "x", "qa_next", "x_next"],
+                       ["det", "h", "cp"])

@@ -59,7 +59,7 @@ BATCH_DEFAULTS: dict[str, Any] = {
 }
 
 #: Rows per call of the mapped guard Function (one compiled library per model).
-GUARD_CHUNK = 64
+GUARD_CHUNK = 256
 #: Scaled distance below which the jump test never fires (round-off, repeated rows); it
 #: grows as 1 / conditioning below 1e-3, where x is ill-determined along the null direction.
 JUMP_FLOOR = 1e-7
@@ -257,26 +257,32 @@ def _checks(model: Model, A, X, ok, path: bool, jump: float, near: float):
         last = np.maximum.accumulate(np.where(ok, idx, -1))
         prev = np.r_[-1, last[:-1]] if n else last
         prev = np.where(prev < 0, idx, prev)
+        # and each closed row with the next closed row after it
+        nxt_c = np.minimum.accumulate(np.where(ok, idx, n)[::-1])[::-1]
+        nxt = np.r_[nxt_c[1:], n] if n else nxt_c
+        nxt = np.where(nxt >= n, idx, nxt)
     else:
-        prev = idx
+        prev = nxt = idx
     g = GUARD_CHUNK
     npad = -(-n // g) * g
     Xc = np.where(np.isfinite(X), X, 0.0)
-    Qp = np.empty((npad, na))
-    Xp = np.empty((npad, nx))
-    Qn = np.empty((npad, na))
-    Xn = np.empty((npad, nx))
-    Qp[:n], Xp[:n], Qn[:n], Xn[:n] = A[prev], Xc[prev], A, Xc
-    Qp[n:], Xp[n:], Qn[n:], Xn[n:] = Qn[n - 1], Xn[n - 1], Qn[n - 1], Xn[n - 1]
+    bufs = []
+    for rows in (prev, idx, nxt):
+        Qb, Xb = np.empty((npad, na)), np.empty((npad, nx))
+        Qb[:n], Xb[:n] = A[rows], Xc[rows]
+        Qb[n:], Xb[n:] = A[n - 1], Xc[n - 1]
+        bufs += [Qb, Xb]
     det = np.empty(npad)
     h = np.empty(npad)
-    cp = np.empty((npad, 4))
+    cpb = np.empty((npad, 4))
     f, _ = model.guard(g)
     ev = FastFn(f)
     for s in range(0, npad, g):
-        ev.into([Qp[s:s + g], Xp[s:s + g], Qn[s:s + g], Xn[s:s + g]],
-                [det[s:s + g], h[s:s + g], cp[s:s + g]])
-    det, h, cp = det[:n], h[:n], cp[:n]
+        ev.into([b[s:s + g] for b in bufs], [det[s:s + g], h[s:s + g], cpb[s:s + g]])
+    det, h, cpb = det[:n], h[:n], cpb[:n]
+    # per row: the prediction made at the previous closed row (its fwd step) and the one
+    # made at this row (its back step)
+    cp = np.column_stack([cpb[prev, 2], cpb[prev, 3], cpb[:, 0], cpb[:, 1]])
     sign = np.where(ok, np.sign(det), 0).astype(np.int8)
     cond = np.where(ok, h, np.nan)
     why = np.zeros(n, dtype=np.int8)
@@ -291,7 +297,8 @@ def _checks(model: Model, A, X, ok, path: bool, jump: float, near: float):
         why[flip] = 1
     crossed = why > 0
     near_s = ok & (h < near)
-    ratio = np.minimum(cp[:, 0] / (cp[:, 1] + floor), cp[:, 2] / (cp[:, 3] + floor))
+    with np.errstate(all="ignore"):
+        ratio = np.minimum(cp[:, 0] / (cp[:, 1] + floor), cp[:, 2] / (cp[:, 3] + floor))
     return sign, cond, crossed, near_s, prev, why, ratio, det
 
 
