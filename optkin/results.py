@@ -56,6 +56,12 @@ def _jsonable(v: Any) -> Any:
     return v
 
 
+def _short_array(a: np.ndarray) -> str:
+    """One line: at most 8 entries shown (first and last 3 of longer arrays)."""
+    return np.array2string(np.asarray(a), precision=4, max_line_width=10**6, threshold=8,
+                           edgeitems=3, separator=", ")
+
+
 @dataclass
 class SolverStats:
     """Which solver ran, how long it took and what it said."""
@@ -138,7 +144,7 @@ class KinResult:
         extra = f", working_mode={self.working_mode}" if self.working_mode is not None else ""
         return (
             f"KinResult({flag}, status={self.status!r}, residual={self.residual:.2e}, "
-            f"nit={self.nit}{extra}, q={np.array2string(self.q, precision=4)})"
+            f"nit={self.nit}{extra}, q={_short_array(self.q)})"
         )
 
     def to_dict(self) -> dict[str, Any]:

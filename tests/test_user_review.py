@@ -454,3 +454,39 @@ def test_unwritable_output_exits_2_without_traceback(tmp_path, capsys, command):
     err = capsys.readouterr().err
     assert "optkin: cannot write the output" in err and "--out" in err
     assert "Traceback" not in err
+
+
+def test_kinresult_repr_is_one_line_for_many_joints():
+    a = np.linspace(0, 2 * np.pi, 7)[:-1]
+    sg = M.stewart_gough(np.c_[np.cos(a), np.sin(a), 0 * a],
+                         0.5 * np.c_[np.cos(a + 0.3), np.sin(a + 0.3), 0 * a])
+    r = optkin.forward(sg, [1.2] * 6)
+    assert len(r.q) > 8
+    s = _one_line(r, limit=200)
+    assert s.startswith("KinResult(ok") and "..." in s
+
+
+def test_wrench_feasible_workspace_grid_needs_two_task_coordinates():
+    fb = M.four_bar(1.0, 2.0, 2.0, 2.5)
+    with pytest.raises(StaticsError, match=r"^grid: four-bar has 1 task coordinate\(s\) \['rz'\]"):
+        statics.wrench_feasible_workspace(fb, [0.1], 1.0, grid=3, bounds=[[0, 1], [0, 1]])
+    res = statics.wrench_feasible_workspace(fb, [0.1], 1.0, poses=[[1.7], [1.8]])
+    assert res.margin.shape == (2,)
+
+
+def test_a_leg_built_directly_is_validated_by_from_legs():
+    Leg = optkin.Leg
+    with pytest.raises(MechanismError, match=r"legs\[0\].type: unknown leg type 'XYZ'"):
+        optkin.Mechanism.from_legs([Leg("XYZ", [0, 0], [0, 0])] * 3, "planar")
+    with pytest.raises(MechanismError, match=r"legs\[0\].platform: expected 2 numbers, got 4"):
+        optkin.Mechanism.from_legs([Leg("RPR", [0, 0], [0, 0, 0, 0])] * 3, "planar")
+    legs = [Leg("RPR", [0, 0], [-0.2, -0.1]), Leg("RPR", [1, 0], [0.25, -0.2]),
+            Leg("RPR", [0.5, 0.9], [0.05, 0.25])]
+    m = optkin.Mechanism.from_legs(legs, "planar")
+    assert json.loads(json.dumps(legs[0].to_dict())) == {
+        "type": "RPR", "base": [0.0, 0.0], "platform": [-0.2, -0.1]}
+    # the same mechanism as the library's 3-RPR with these points
+    ref = M.rpr3([[0, 0], [1, 0], [0.5, 0.9]], [[-0.2, -0.1], [0.25, -0.2], [0.05, 0.25]])
+    assert m.key == ref.key or all(
+        a.type == b.type and np.allclose(a.base, b.base) and np.allclose(a.platform, b.platform)
+        for a, b in zip(m.legs, ref.legs))

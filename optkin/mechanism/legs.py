@@ -105,21 +105,30 @@ class Leg:
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {
             "type": self.type,
-            "base": self.base.tolist(),
-            "platform": self.platform.tolist(),
+            "base": np.asarray(self.base, dtype=float).tolist(),
+            "platform": np.asarray(self.platform, dtype=float).tolist(),
         }
         if self.lengths:
             d["lengths"] = list(self.lengths)
         if self.axis is not None:
-            d["axis"] = self.axis.tolist()
-            d["arm"] = self.arm.tolist()  # type: ignore[union-attr]
+            d["axis"] = np.asarray(self.axis, dtype=float).tolist()
+            d["arm"] = np.asarray(self.arm, dtype=float).tolist()
         return d
 
     @classmethod
     def from_spec(cls, spec: Mapping[str, Any] | Leg, i: int) -> Leg:
         """Build and validate leg ``i`` (0-based) from a mapping."""
-        if isinstance(spec, Leg):
-            return spec
+        if isinstance(spec, Leg):  # re-validated: a Leg built directly skipped the checks
+            fields: dict[str, Any] = {"type": spec.type, "base": spec.base,
+                                      "platform": spec.platform}
+            if spec.lengths:
+                fields["lengths"] = spec.lengths
+            for key in ("axis", "arm"):
+                if getattr(spec, key) is not None:
+                    fields[key] = getattr(spec, key)
+            if spec.actuated != -1:
+                fields["actuated"] = spec.actuated
+            spec = fields
         where = f"legs[{i}]"
         if not isinstance(spec, Mapping):
             raise MechanismError(f"{where}: expected a mapping with type, base, platform")

@@ -684,6 +684,10 @@ def wrench_feasible_workspace(
     td = mech.task_dim
     tnames = tuple(mech.task)
     grid_shape = None
+    if poses is None and td < 2:
+        raise StaticsError(
+            f"grid: {mech.name} has {td} task coordinate(s) {list(tnames)}, a grid needs two; "
+            f"give poses, an array (N, {td}) of task coordinates")
     if isinstance(posture, bool) or not isinstance(posture, (int, np.integer)) or posture < 0:
         raise StaticsError(f"posture: expected a non-negative integer index, got {posture!r}")
     if working_mode is not None:
