@@ -210,7 +210,15 @@ class SolutionSet(Sequence):
 
     def nonsingular(self, max_cond: float = 1e8) -> SolutionSet:
         """The solutions whose condition number of W_p is at most ``max_cond``."""
-        max_cond = float(max_cond)
+        try:
+            max_cond = float(max_cond)
+        except (TypeError, ValueError):
+            max_cond = float("nan")
+        if not max_cond >= 1:  # NaN fails too
+            from .errors import MechanismError
+
+            raise MechanismError(f"max_cond: expected a number >= 1 (a condition number), got "
+                                 f"{max_cond!r}")
         keep = [s for s in self._sols if not (np.isfinite(s.cond) and s.cond > max_cond)]
         return SolutionSet(keep, self.kind, self.info, self.seed)
 

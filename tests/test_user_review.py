@@ -490,3 +490,20 @@ def test_a_leg_built_directly_is_validated_by_from_legs():
     assert m.key == ref.key or all(
         a.type == b.type and np.allclose(a.base, b.base) and np.allclose(a.platform, b.platform)
         for a, b in zip(m.legs, ref.legs))
+
+
+def test_nonsingular_checks_its_threshold(rpr3, closed):
+    s = optkin.assembly_modes(rpr3, closed.qa)
+    for bad in ("a", float("nan"), 0.5):
+        with pytest.raises(MechanismError, match=r"max_cond: expected a number >= 1"):
+            s.nonsingular(bad)
+    cut = float(np.median([r.cond for r in s]))
+    kept = s.nonsingular(cut)
+    assert all(r.cond <= cut for r in kept) and len(kept) >= 1
+
+
+def test_aspects_and_workspace_plot_name_a_bad_path():
+    five = M.five_bar(9, 8, 5, 5, 8)
+    for obj in (optkin.aspects(five), optkin.workspace(five)):
+        with pytest.raises(MechanismError, match=r"path: expected a file name"):
+            obj.plot(123)

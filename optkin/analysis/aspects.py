@@ -22,6 +22,7 @@ with holes and its exact (polygon) area.
 from __future__ import annotations
 
 import itertools
+import os
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -150,6 +151,7 @@ class Aspects:
 
     def plot(self, path: str | None = None, title: str | None = None) -> Any:
         """One column per working mode: its aspects in the workspace and the joint space."""
+        _check_path(path)
         return _plot_aspects(self, path, title)
 
 
@@ -186,6 +188,8 @@ class Workspace:
                 "time": self.time}
 
     def plot(self, path: str | None = None, title: str | None = None) -> Any:
+        """The reachable regions of each working mode and their union."""
+        _check_path(path)
         return _plot_workspace(self, path, title)
 
 
@@ -280,6 +284,12 @@ def _label(mech: Mechanism, pidx, fixed: dict[int, float], P: np.ndarray, mode,
         if tuple(np.sign(B[:, 0]).astype(int)) == tuple(mode):
             return v, float(d[0])
     return None, 0.0
+
+
+def _check_path(path: Any) -> None:
+    if path is not None and not isinstance(path, (str, os.PathLike)):
+        raise MechanismError(f"path: expected a file name (str or os.PathLike) for the PNG, "
+                             f"got {type(path).__name__}")
 
 
 def _check_plane(mech: Mechanism, fixed: Mapping[str, float] | None):
