@@ -36,12 +36,15 @@ starts is missed by all n starts with probability (1 - p)^n <= e^-4.6 = 1 %. The
 stopping): measured on Dietmaier's platform (40 seeds, ``min_starts=32``), stopping when
 the bound is at most 0.01, the modes missed at the stop held a larger share of the starts
 than the bound in 2 of 40 runs at 99 % (9 of 40 with a 95 % bound); stopping when the
-estimate is at most 0.01, they held more than the estimate in 33 of 40 runs. Enumeration stops when the estimate is at most ``target`` and the bound at most
+estimate is at most 0.01, they held more than the estimate in 33 of 40 runs.
+
+Enumeration stops when the estimate is at most ``target`` and the bound at most
 ``target_upper`` (1e-3 and 1e-2 by default: the bound adds a condition only where it is
 cheap, when no start was a singleton, e.g. 460 instead of 256 starts for a small system
-below its known bound; ``target_upper=1`` drops it), after at least ``min_starts`` (256
-starts for small systems and 2048 for 6+ unknowns, set so that modes hit by 0.3 % of the
-starts, as the rarest of Dietmaier's platform are, are found), when the number of
+below its known bound or without one; ``target_upper=1`` drops it), after at least
+``min_starts`` (256 starts for small systems and 2048 for 6+ unknowns, set so that modes
+hit by 0.3 % of the starts, as the rarest of Dietmaier's platform are, are found), when the
+number of
 solutions reaches a known upper bound for the mechanism class (6 for a planar platform with
 three distance legs, 40 for a 6-6 platform, 2 for a five-bar or a Delta: the set is then
 provably complete), or at the start budget or time limit. Below such an even bound an odd
