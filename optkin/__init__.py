@@ -17,7 +17,7 @@ from .analysis import (
 )
 from .analysis.aspects import Aspects, Workspace, aspects, workspace
 from .analysis.continuation import SingularCurves, singular_curves
-from .errors import MechanismError, OptkinError, ProblemFileError, SolverError
+from .errors import MechanismError, OptkinError, ProblemFileError, SolverError, StaticsError
 from .mechanism import Leg, Mechanism
 from .model import get_model
 from .results import KinResult, SolutionSet, SolverStats
@@ -46,6 +46,7 @@ __all__ = [
     "SolutionSet",
     "SolverError",
     "SolverStats",
+    "StaticsError",
     "WorkingModes",
     "__version__",
     "assembly_modes",

@@ -71,7 +71,7 @@ def draw(
 
     Returns the path written.
     """
-    from .solvers.common import check_mechanism
+    from .solvers.common import check_mechanism, check_result_of
 
     check_mechanism(mech, "draw")
     rs = [results] if isinstance(results, KinResult) else list(results)
@@ -81,6 +81,8 @@ def draw(
         raise MechanismError(
             "results: expected a KinResult or a sequence of them (from optkin.forward, "
             f"inverse, assembly_modes, track), got {type(results).__name__}")
+    for r in rs:
+        check_result_of(mech, r, "results")
     plt = _mpl()
     rs = [r for r in rs if np.all(np.isfinite(r.q))]
     n = max(1, len(rs))

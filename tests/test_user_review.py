@@ -507,3 +507,32 @@ def test_aspects_and_workspace_plot_name_a_bad_path():
     for obj in (optkin.aspects(five), optkin.workspace(five)):
         with pytest.raises(MechanismError, match=r"path: expected a file name"):
             obj.plot(123)
+
+
+def test_a_result_of_another_mechanism_is_named_as_such(rpr3, closed, tmp_path):
+    five = M.five_bar(9, 8, 5, 5, 8)
+    other = optkin.inverse(five, [4.5, 6.0])[0]
+    calls = {
+        "guess": [lambda: optkin.forward(rpr3, closed.qa, guess=other),
+                  lambda: optkin.track(rpr3, [closed.qa, closed.qa * 1.01], guess=other)],
+        "q": [lambda: optkin.jacobians(rpr3, other), lambda: optkin.classify(rpr3, other),
+              lambda: statics.capability(rpr3, other, 1.0)],
+        "results": [lambda: optkin.plot.draw(rpr3, other, str(tmp_path / "x.png"))],
+    }
+    for arg, fns in calls.items():
+        for fn in fns:
+            with pytest.raises(MechanismError,
+                               match=rf"^{arg}: the KinResult belongs to another mechanism"):
+                fn()
+    # a result of a mechanism with the same joints (another 3-RPR) is a valid guess
+    twin = M.rpr3(base=[[0, 0], [1.01, 0], [0.5, 0.9]],
+                  platform=[[-0.2, -0.1], [0.25, -0.2], [0.05, 0.25]])
+    qa_twin = optkin.inverse(twin, [0.45, 0.35, 0.1])[0].qa
+    r = optkin.forward(twin, qa_twin, guess=closed)
+    assert r.success and np.allclose(r.pose[:2, 3], [0.45, 0.35], atol=1e-8)
+
+
+def test_statics_error_is_exported_at_the_top_level(rpr3, closed):
+    assert "StaticsError" in optkin.__all__
+    with pytest.raises(optkin.StaticsError, match="limits"):
+        statics.capability(rpr3, closed, limits=-1.0)

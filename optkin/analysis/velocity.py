@@ -57,6 +57,9 @@ def config_of(mech: Mechanism, q: Any) -> tuple[np.ndarray, np.ndarray, np.ndarr
     nq = len(mech.joint_names)
     act = np.array(mech.actuated)
     if isinstance(q, KinResult):
+        from ..solvers.common import check_result_of
+
+        check_result_of(mech, q, "q")
         qv = np.asarray(q.q, dtype=float)
         x = np.asarray(q.x, dtype=float)
         if qv.shape != (nq,) or not np.all(np.isfinite(qv)):

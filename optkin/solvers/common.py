@@ -14,7 +14,8 @@ from ..errors import MechanismError
 from ..model import Model
 from ..results import KinResult, SolverStats
 
-__all__ = ["merge_options", "check_qa", "check_mechanism", "newton", "make_result", "parse_guess"]
+__all__ = ["merge_options", "check_qa", "check_mechanism", "check_result_of", "newton",
+           "make_result", "parse_guess"]
 
 
 def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: str) -> dict[str, Any]:
@@ -52,6 +53,21 @@ def check_mechanism(mech: Any, where: str) -> None:
             "with optkin.mechanisms.* or Mechanism.from_khalil / from_legs")
 
 
+def check_result_of(mech: Any, r: KinResult, where: str) -> None:
+    """Raise a MechanismError naming ``where`` when ``r`` was solved on another mechanism.
+
+    Results carry the joint names of their mechanism; one with other names (or, without
+    names, with a q of another length) cannot describe a configuration of ``mech``.
+    """
+    names = tuple(r.joint_names or ())
+    mine = tuple(mech.joint_names)
+    if (names and names != mine) or (not names and np.size(r.q) != len(mine)):
+        got = list(names) if names else f"{np.size(r.q)} joint values"
+        raise MechanismError(
+            f"{where}: the KinResult belongs to another mechanism (joints {got}), not "
+            f"{mech.name!r} (joints {list(mine)}); solve on this mechanism first")
+
+
 def check_qa(model: Model, qa: Any) -> np.ndarray:
     mech = model.mech
     na = mech.n_actuated
@@ -86,6 +102,7 @@ def parse_guess(model: Model, qa: np.ndarray, guess: Any) -> np.ndarray:
     if guess is None:
         return model.default_x(qa)
     if isinstance(guess, KinResult):
+        check_result_of(mech, guess, "guess")
         return np.asarray(guess.x, dtype=float).copy()
     try:
         g = np.asarray(guess, dtype=float)

@@ -214,6 +214,9 @@ def _config(model: Model, q: Any) -> tuple[np.ndarray, np.ndarray]:
     """(q_a, x) from a KinResult or a full joint vector."""
     mech = model.mech
     if isinstance(q, KinResult):
+        from ..solvers.common import check_result_of
+
+        check_result_of(mech, q, "q")
         if not q.success:
             raise MechanismError(
                 f"q: the KinResult did not close the loops (status {q.status!r}, max |Phi| = "
