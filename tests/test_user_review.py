@@ -536,3 +536,13 @@ def test_statics_error_is_exported_at_the_top_level(rpr3, closed):
     assert "StaticsError" in optkin.__all__
     with pytest.raises(optkin.StaticsError, match="limits"):
         statics.capability(rpr3, closed, limits=-1.0)
+
+
+def test_jacobians_and_static_model_to_dict_are_strict_json_far_from_closure(rpr3):
+    q = np.full(9, 1e300)  # absurd but finite joint values: the matrices overflow
+    jac = optkin.jacobians(rpr3, q)
+    assert not jac.success and "NOT CLOSED" in _one_line(jac)
+    d = json.loads(json.dumps(jac.to_dict(), allow_nan=False))
+    assert d["residual"] is None or math.isfinite(d["residual"])
+    sm = statics.static_model(rpr3, q)
+    json.dumps(sm.to_dict(), allow_nan=False)

@@ -34,7 +34,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
-from ..results import KinResult
+from ..results import KinResult, _jsonable
 from ._functions import analysis_functions
 
 __all__ = ["Jacobians", "jacobians", "config_of", "twist_rows", "TWIST_NAMES"]
@@ -251,7 +251,7 @@ class Jacobians:
             out[k] = None if v is None else np.asarray(v).tolist()
         for k in ("twist_names", "row_names", "qa_names", "qp_names", "qc_names", "x_names"):
             out[k] = list(getattr(self, k))
-        return out
+        return _jsonable(out)  # NaN / inf entries (unclosed or singular q) -> None
 
     def __repr__(self) -> str:
         flag = "ok" if self.success else "NOT CLOSED"

@@ -69,7 +69,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import Model, get_model
-from ..results import KinResult
+from ..results import KinResult, _jsonable
 
 __all__ = ["StaticModel", "static_model", "wrench_names"]
 
@@ -197,14 +197,14 @@ class StaticModel:
         def arr(a):
             return None if a is None else np.asarray(a).tolist()
 
-        return {
+        return _jsonable({
             "A": arr(self.A), "B": arr(self.B), "P": arr(self.P), "G": arr(self.G),
             "J": arr(self.J), "wrench_names": list(self.wrench_names),
             "actuator_names": list(self.actuator_names),
             "unresisted": arr(self.unresisted), "free_wrenches": arr(self.free_wrenches),
             "singularity": self.singularity,
             "cond": self.cond if np.isfinite(self.cond) else None,
-        }
+        })
 
 
 # --------------------------------------------------------------------------------------
