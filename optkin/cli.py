@@ -200,6 +200,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
         if res is None or not res.success:
             _err(f"{path.name}: no task gave a configuration to draw; add a forward or inverse task")
             return EXIT_FAILED
+        _err(f"{path.name}: no forward or inverse task gave a configuration; drawing the one at "
+             "q_a = 0 nearest to the mechanism's home instead")
         what = res
     out = Path(args.out) if args.out else path.with_suffix(".png")
     if out.is_dir():  # -o DIR: the picture goes into it, named after the problem file

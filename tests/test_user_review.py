@@ -546,3 +546,18 @@ def test_jacobians_and_static_model_to_dict_are_strict_json_far_from_closure(rpr
     assert d["residual"] is None or math.isfinite(d["residual"])
     sm = statics.static_model(rpr3, q)
     json.dumps(sm.to_dict(), allow_nan=False)
+
+
+def test_show_says_when_it_draws_the_home_configuration_instead_of_a_task(tmp_path, capsys):
+    """The five-bar's base joints are 9 apart; at q_a = (pi, 0) the elbows C = (-8, 0) and
+    D = (17, 0) are 25 > L2 + L3 = 10 apart: the task cannot close."""
+    pytest.importorskip("matplotlib")
+    f = tmp_path / "unreachable.toml"
+    f.write_text('schema_version = 1\nname = "x"\n[mechanism]\ntype = "library"\n'
+                 'name = "five_bar"\nargs = { L0 = 9, L1 = 8, L2 = 5, L3 = 5, L4 = 8 }\n'
+                 '[[task]]\nkind = "forward"\nqa = [3.14159, 0.0]\n')
+    png = tmp_path / "u.png"
+    assert main(["show", str(f), "--out", str(png)]) == 0
+    out = capsys.readouterr()
+    assert "drawing the one at q_a = 0" in out.err and "Traceback" not in out.err
+    assert png.read_bytes()[:4] == b"\x89PNG"
