@@ -561,3 +561,14 @@ def test_show_says_when_it_draws_the_home_configuration_instead_of_a_task(tmp_pa
     out = capsys.readouterr()
     assert "drawing the one at q_a = 0" in out.err and "Traceback" not in out.err
     assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_batch_result_to_dict_is_strict_json_with_diverged_rows(rpr3):
+    import dataclasses
+
+    b = optkin.forward_batch(rpr3, [[0.7, 0.6, 0.5], [0.7, 0.6, 0.5]], path=False)
+    # rows of a batch that diverged carry NaN unknowns and an infinite residual
+    bad = dataclasses.replace(b, residual=np.array([0.0, np.inf]),
+                              x=np.vstack([b.x[0], np.full(3, np.nan)]))
+    d = json.loads(json.dumps(bad.to_dict(), allow_nan=False))
+    assert d["residual"] == [0.0, None] and d["x"][1] == [None, None, None]

@@ -43,7 +43,7 @@ from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import Model, get_model
 from ..model.compiled import FastFn
-from ..results import KinResult, SolverStats
+from ..results import KinResult, SolverStats, _jsonable
 from .common import check_qa, make_result, merge_options, parse_guess, timer
 from .forward import forward
 
@@ -167,7 +167,8 @@ class BatchResult:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        """A JSON-ready dict (NaN and inf entries, e.g. of rows that diverged, become None)."""
+        return _jsonable({
             "x": self.x.tolist(), "qa": self.qa.tolist(), "success": self.success.tolist(),
             "residual": self.residual.tolist(), "nit": self.nit.tolist(),
             "status": self.status, "message": self.message, "stats": self.stats.to_dict(),
@@ -175,7 +176,7 @@ class BatchResult:
             "conditioning": [None if not np.isfinite(c) else float(c)
                              for c in self.conditioning],
             "crossed": self.crossed.tolist(), "near_singular": self.near_singular.tolist(),
-        }
+        })
 
 
 def _as_rows(model: Model, QA: Any) -> np.ndarray:
