@@ -572,3 +572,13 @@ def test_batch_result_to_dict_is_strict_json_with_diverged_rows(rpr3):
                               x=np.vstack([b.x[0], np.full(3, np.nan)]))
     d = json.loads(json.dumps(bad.to_dict(), allow_nan=False))
     assert d["residual"] == [0.0, None] and d["x"][1] == [None, None, None]
+
+
+def test_forward_failure_from_a_far_guess_points_at_other_guesses(rpr3, unclosed):
+    """Leg lengths (0.7, 0.6, 0.5) close (solved from the home guess), yet the local solvers
+    started from the unclosed configuration of ``unclosed`` stall: the message must not
+    only blame the input."""
+    assert optkin.forward(rpr3, [0.7, 0.6, 0.5]).success
+    r = optkin.forward(rpr3, [0.7, 0.6, 0.5], guess=unclosed)
+    if not r.success:  # data, not an exception; the message names both causes
+        assert "out of reach" in r.message and "another guess" in r.message

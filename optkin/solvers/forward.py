@@ -98,7 +98,8 @@ def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinR
     if not ok:
         msg = (
             f"no closed configuration found (IPOPT: {raw}; max |Phi| = {r:.2e}): the active "
-            "joint values may be out of reach (e.g. legs too short to close)"
+            "joint values may be out of reach (e.g. legs too short to close), or the guess too "
+            "far from any closed configuration: try another guess, or optkin.assembly_modes"
         )
     return make_result(model, qa, x, tol, nit + npol, stats, status, msg)
 
