@@ -582,3 +582,25 @@ def test_forward_failure_from_a_far_guess_points_at_other_guesses(rpr3, unclosed
     r = optkin.forward(rpr3, [0.7, 0.6, 0.5], guess=unclosed)
     if not r.success:  # data, not an exception; the message names both causes
         assert "out of reach" in r.message and "another guess" in r.message
+
+
+def test_statics_plots_check_their_arguments(rpr3, closed, tmp_path):
+    cap = statics.capability_polygon(rpr3, closed, 1.0, n=8)
+    ws = statics.wrench_feasible_workspace(rpr3, [0, -0.1, 0], 1.0, poses=[[0.45, 0.35, 0.1]])
+    png = str(tmp_path / "p.png")
+    with pytest.raises(StaticsError, match=r"^res: expected a CapabilityResult"):
+        statics.plot_capability(ws, png)
+    with pytest.raises(StaticsError, match=r"^res: expected a WorkspaceResult"):
+        statics.plot_workspace(cap, png)
+    with pytest.raises(StaticsError, match=r"^plane: expected two different components"):
+        statics.plot_capability(cap, png, plane=("fx", "fq"))
+    with pytest.raises(StaticsError, match=r"^path: expected a file name"):
+        statics.plot_capability(cap, 5)
+    with pytest.raises(MechanismError, match=r"^path: expected a file name"):
+        optkin.singular_curves(M.five_bar(9, 8, 5, 5, 8)).plot(5)
+    assert statics.plot_capability(cap, png) == png
+    import io
+
+    buf = io.BytesIO()
+    statics.plot_workspace(ws, buf)  # file-like objects are still accepted
+    assert buf.getvalue()[:4] == b"\x89PNG"

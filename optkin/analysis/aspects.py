@@ -287,7 +287,7 @@ def _label(mech: Mechanism, pidx, fixed: dict[int, float], P: np.ndarray, mode,
 
 
 def _check_path(path: Any) -> None:
-    if path is not None and not isinstance(path, (str, os.PathLike)):
+    if path is not None and not (isinstance(path, (str, os.PathLike)) or hasattr(path, "write")):
         raise MechanismError(f"path: expected a file name (str or os.PathLike) for the PNG, "
                              f"got {type(path).__name__}")
 

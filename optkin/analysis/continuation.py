@@ -309,8 +309,9 @@ class SingularCurves:
 
     def plot(self, path: str | None = None, ax: Any = None, title: str | None = None) -> Any:
         """Draw the curves in the plane (PNG when ``path`` is given)."""
-        from .aspects import _plot_curves
+        from .aspects import _check_path, _plot_curves
 
+        _check_path(path)
         return _plot_curves(self, path, ax, title)
 
 

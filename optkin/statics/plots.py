@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..errors import StaticsError
 from .results import CapabilityResult, WorkspaceResult
 
 __all__ = ["plot_capability", "plot_workspace"]
@@ -19,6 +20,15 @@ def _plt():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def _check(res: object, cls: type, path: object, made_by: str) -> None:
+    if not isinstance(res, cls):
+        raise StaticsError(f"res: expected a {cls.__name__} (from {made_by}), got "
+                           f"{type(res).__name__}")
+    if not (isinstance(path, (str, os.PathLike)) or hasattr(path, "write")):
+        raise StaticsError(f"path: expected a file name (str or os.PathLike) for the PNG, got "
+                           f"{type(path).__name__}")
 
 
 def plot_capability(
@@ -34,8 +44,11 @@ def plot_capability(
     drawn at the origin in red, unbounded ones as arrows. ``exact`` (k, 2): the exact
     section of the capability polytope, drawn dashed. Returns the path written.
     """
-    plt = _plt()
+    _check(res, CapabilityResult, path, "capability / capability_polygon")
     names = list(res.wrench_names)
+    if len(plane) != 2 or plane[0] == plane[1] or any(c not in names for c in plane):
+        raise StaticsError(f"plane: expected two different components of {names}, got {plane!r}")
+    plt = _plt()
     i, j = names.index(plane[0]), names.index(plane[1])
     other = [k for k in range(len(names)) if k not in (i, j)]
     D = res.directions
@@ -81,6 +94,7 @@ def plot_workspace(
     Green: feasible (margin >= 0); the 0 contour bounds the wrench-feasible workspace;
     grey: unreachable; black crosses: singular (the set is not resisted).
     """
+    _check(res, WorkspaceResult, path, "wrench_feasible_workspace")
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.0, 5.0))
     P, M = res.poses, res.margin.copy()
