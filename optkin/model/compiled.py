@@ -53,7 +53,7 @@ __all__ = [
 log = logging.getLogger("optkin.compiled")
 
 #: Bump when the generated Functions change meaning (part of every cache key).
-CODE_VERSION = "1"
+CODE_VERSION = "2"
 
 _FLAGS = ("-O1", "-shared", "-fPIC")  # -O2 compiles twice as long, runs no faster
 _BUILD_LOCK = threading.Lock()
@@ -122,6 +122,9 @@ def _digest(tag: str, funcs: Sequence[ca.Function]) -> str:
         sig += [f"{f.name_out(i)}:{f.size1_out(i)}x{f.size2_out(i)}:{f.nnz_out(i)}"
                 for i in range(f.n_out())]
         h.update("|".join(sig).encode())
+        # the whole expression graph, so that a changed body (e.g. of a mapped tracker whose
+        # outer signature is unchanged) never loads a stale library
+        h.update(f.serialize().encode())
     return h.hexdigest()[:20]
 
 
