@@ -604,3 +604,11 @@ def test_statics_plots_check_their_arguments(rpr3, closed, tmp_path):
     buf = io.BytesIO()
     statics.plot_workspace(ws, buf)  # file-like objects are still accepted
     assert buf.getvalue()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize("home", [{"t1": float("nan")}, {"t1": "up"}, [np.inf], "abc", [1.0, 2.0]])
+def test_khalil_home_must_be_finite_joint_values(home):
+    row = dict(a=0, mu=1, sigma=0, gamma=0, b=0, alpha=0, d=0, theta="t1", r=0)
+    with pytest.raises(MechanismError, match=r"^home: expected 1 finite joint values \['t1'\]"):
+        optkin.Mechanism.from_khalil([row], home=home)
+    assert optkin.Mechanism.from_khalil([row], home={"t1": 0.2}).home.tolist() == [0.2]

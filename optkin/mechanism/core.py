@@ -246,10 +246,19 @@ class Mechanism:
             unknown = sorted(set(home) - set(self.joint_names))
             if unknown:
                 raise MechanismError(f"home: unknown joint(s) {unknown}; joints: {self.joint_names}")
-            return np.array([float(home.get(n, 0.0)) for n in self.joint_names])
-        h = np.asarray(home, dtype=float)
-        if h.shape != (len(self.joint_names),):
-            raise MechanismError(f"home: expected {len(self.joint_names)} joint values")
+            try:
+                h = np.array([float(home.get(n, 0.0)) for n in self.joint_names])
+            except (TypeError, ValueError):
+                h = np.full(len(self.joint_names), np.nan)
+        else:
+            try:
+                h = np.asarray(home, dtype=float)
+            except (TypeError, ValueError):
+                h = np.full(0, np.nan)
+        if h.shape != (len(self.joint_names),) or not np.all(np.isfinite(h)):
+            raise MechanismError(
+                f"home: expected {len(self.joint_names)} finite joint values "
+                f"{list(self.joint_names)} (a sequence or a {{name: value}} table), got {home!r}")
         return h
 
     def _check_limits(self, limits: Any) -> dict[str, tuple[float, float]]:
