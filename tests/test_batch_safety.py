@@ -340,3 +340,18 @@ def test_upper_bound_covers_the_rare_modes_of_dietmaiers_platform():
     assert by_bound >= 17, by_bound  # a 99 % bound, checked after every batch
     assert by_estimate <= 10, by_estimate  # the estimate alone is not conservative
     assert complete_bound > complete_estimate
+
+
+def test_path_that_starts_out_of_reach_recovers_when_the_legs_can_close():
+    base = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.9]])
+    plat = np.array([[-0.2, -0.1], [0.25, -0.2], [0.05, 0.25]])
+    m = optkin.mechanisms.rpr3(base, plat)
+    start = optkin.inverse(m, [0.45, 0.35, 0.1])[0]
+    QA = np.vstack([[0.01, 0.01, 0.01]] * 3 + [start.qa + 0.001 * k for k in range(40)])
+    b = optkin.forward_batch(m, QA)
+    assert not b.success[:3].any() and b.success[3:].all()
+    # leg lengths of every solved pose, written out (Modern Robotics 7.1.1), equal the inputs
+    for qa, (x, y, phi) in zip(QA[3:], b.x[3:]):
+        R = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
+        rho = np.linalg.norm(np.array([x, y]) + plat @ R.T - base, axis=1)
+        np.testing.assert_allclose(rho, qa, atol=1e-9)

@@ -395,7 +395,19 @@ def _track(model: Model, A, guess, tol, chunk, iters, fallback, guard=None) -> B
     Rc = np.empty(chunk)
     junk = np.empty((chunk, na))
     i, calls, nfall = 1, 0, 0
+    anchored = bool(first.success)
     while i < n:
+        if not anchored:
+            # no closed configuration to continue from yet (e.g. the path starts out of
+            # reach): solve rows one by one from the caller's guess until one closes
+            r = forward(model.mech, A[i], guess=guess, tol=tol)
+            nfall += 1
+            X[i], R[i], nit[i] = r.x, r.residual, r.nit
+            if r.success:
+                xs, qs = np.array(r.x, dtype=float), A[i].copy()
+                anchored = True
+            i += 1
+            continue
         k = min(chunk, n - i)
         Qc[:k] = A[i:i + k]
         Qc[k:] = A[i + k - 1]
