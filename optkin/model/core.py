@@ -13,7 +13,6 @@ import hashlib
 import math
 import threading
 import time
-from collections.abc import Sequence
 from typing import Any
 
 import casadi as ca
@@ -21,7 +20,7 @@ import numpy as np
 
 from ..errors import MechanismError
 from ..mechanism import Mechanism
-from ..mechanism.geometry import homogeneous, matrix_to_quat, rot2
+from ..mechanism.geometry import homogeneous, matrix_to_quat, quat_to_matrix, rot2
 from ..mechanism.legs import leg_forward, leg_joints
 from . import compiled as cc
 from . import fused
@@ -221,7 +220,7 @@ class Model:
         quats = [matrix_to_quat(R) for R in Rs]
         ref = quats[0]
         qm = np.mean([qq if qq @ ref >= 0 else -qq for qq in quats], axis=0)
-        return self.x_from_pose(homogeneous(_quat_R(qm), p))
+        return self.x_from_pose(homogeneous(quat_to_matrix(qm), p))
 
     def x_from_pose(self, T: np.ndarray) -> np.ndarray:
         """The unknowns x of a platform pose (leg-described mechanisms)."""
@@ -456,15 +455,6 @@ class Model:
             self._nlp = ca.nlpsol("forward", "ipopt", {"x": x, "p": p, "f": f, "g": g}, opts)
             self.nlp_build_time = time.perf_counter() - t0
         return self._nlp
-
-    def names(self) -> Sequence[str]:
-        return self.mech.joint_names
-
-
-def _quat_R(q: np.ndarray) -> np.ndarray:
-    from ..mechanism.geometry import quat_to_matrix
-
-    return quat_to_matrix(q)
 
 
 def damped_step(F, z, dz, scale, params, max_step: float = 1.0):
