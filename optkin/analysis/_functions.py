@@ -16,12 +16,12 @@ obtained by automatic differentiation of the same independent closure rows as th
 
 from __future__ import annotations
 
-import threading
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
+from .._cache import KeyedCache
 from ..mechanism import Mechanism
 from ..model import get_model
 from ..model import khalil as kh
@@ -29,20 +29,12 @@ from ..model import legs as lg
 
 __all__ = ["AnalysisFunctions", "analysis_functions"]
 
-_CACHE: dict[str, AnalysisFunctions] = {}
-_LOCK = threading.Lock()
+_CACHE: KeyedCache[AnalysisFunctions] = KeyedCache()
 
 
 def analysis_functions(mech: Mechanism) -> AnalysisFunctions:
     """The cached analysis Functions of ``mech`` (built on first use)."""
-    f = _CACHE.get(mech.key)
-    if f is None:
-        with _LOCK:
-            f = _CACHE.get(mech.key)
-            if f is None:
-                f = AnalysisFunctions(mech)
-                _CACHE[mech.key] = f
-    return f
+    return _CACHE.get(mech.key, lambda: AnalysisFunctions(mech))
 
 
 def _twist_jacobian(R: ca.SX, p: ca.SX, q: ca.SX) -> ca.SX:

@@ -18,6 +18,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .._cache import KeyedCache
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..mechanism.geometry import homogeneous, matrix_to_quat, quat_to_matrix, rot2
@@ -29,8 +30,7 @@ from . import legs as lg
 
 __all__ = ["Model", "get_model", "clear_cache"]
 
-_CACHE: dict[str, Model] = {}
-_LOCK = threading.Lock()
+_CACHE: KeyedCache[Model] = KeyedCache()
 #: forward() calls on one model after which it is compiled (OPTKIN_COMPILE=auto)
 HOT_USES = 100
 
@@ -42,14 +42,7 @@ def get_model(mech: Mechanism) -> Model:
             f"expected an optkin Mechanism, got {type(mech).__name__}; build one with "
             "optkin.mechanisms.* or Mechanism.from_khalil / from_legs"
         )
-    m = _CACHE.get(mech.key)
-    if m is None:
-        with _LOCK:
-            m = _CACHE.get(mech.key)
-            if m is None:
-                m = Model(mech)
-                _CACHE[mech.key] = m
-    return m
+    return _CACHE.get(mech.key, lambda: Model(mech))
 
 
 def clear_cache() -> None:

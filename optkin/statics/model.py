@@ -59,13 +59,14 @@ Two kinds of singular configurations show up in (2):
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass, field
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
+from .._cache import KeyedCache
+from ..analysis._functions import _twist_jacobian
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import Model, get_model
@@ -76,8 +77,7 @@ __all__ = ["StaticModel", "static_model", "wrench_names"]
 #: default relative tolerance on singular values for the singularity tests
 SING_TOL = 1e-9
 
-_KH_CACHE: dict[str, ca.Function] = {}
-_KH_LOCK = threading.Lock()
+_KH_CACHE: KeyedCache[ca.Function] = KeyedCache()
 
 _TASK_TO_WRENCH = {"x": "fx", "y": "fy", "z": "fz", "rx": "mx", "ry": "my", "rz": "mz"}
 _TASK_TO_TWIST = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
@@ -245,27 +245,16 @@ def _quat_rate(quat: np.ndarray) -> np.ndarray:
 
 def _khalil_twist(model: Model) -> ca.Function:
     """(q_a, x) -> (J_a, J_x): the 6-row twist Jacobian (v; w) of the end-effector frame."""
-    key = model.mech.key
-    f = _KH_CACHE.get(key)
-    if f is None:
-        with _KH_LOCK:
-            qa, x = model.qa_sym, model.x_sym
-            T = model.pose_fn(qa, x)
-            p, R = T[:3, 3], T[:3, :3]
-            z = ca.vertcat(qa, x)
-            Jv = ca.jacobian(p, z)
-            # w = 1/2 sum_k r_k x r_k_dot over the columns r_k of R
-            Jw = ca.SX.zeros(3, z.shape[0])
-            for k in range(3):
-                rk = R[:, k]
-                dk = ca.jacobian(rk, z)
-                for j in range(z.shape[0]):
-                    Jw[:, j] += 0.5 * ca.cross(rk, dk[:, j])
-            J = ca.vertcat(Jv, Jw)
-            na = model.na
-            f = ca.Function("twist", [qa, x], [J[:, :na], J[:, na:]], ["qa", "x"], ["J_a", "J_x"])
-            _KH_CACHE[key] = f
-    return f
+
+    def build() -> ca.Function:
+        qa, x = model.qa_sym, model.x_sym
+        T = model.pose_fn(qa, x)
+        J = _twist_jacobian(T[:3, :3], T[:3, 3], ca.vertcat(qa, x))
+        na = model.na
+        return ca.Function("twist", [qa, x], [J[:, :na], J[:, na:]], ["qa", "x"],
+                           ["J_a", "J_x"])
+
+    return _KH_CACHE.get(model.mech.key, build)
 
 
 def _null(M: np.ndarray, tol: float) -> np.ndarray:

@@ -19,14 +19,14 @@ from typing import Any
 import cvxpy as cp
 import numpy as np
 
+from .._cache import KeyedCache
 from ..results import SolverStats
 
 __all__ = ["CvxProblem", "capability_problem", "capability_batch_problem", "margin_problem",
            "margin_batch_problem", "distribution_problem",
            "solve", "cvx_status", "clear_cache"]
 
-_CACHE: dict[tuple, CvxProblem] = {}
-_LOCK = threading.Lock()
+_CACHE: KeyedCache[CvxProblem] = KeyedCache()
 
 #: cvxpy status -> optkin status (results.STATUS vocabulary)
 STATUS_MAP = {
@@ -61,14 +61,7 @@ class CvxProblem:
 def _cached(key: tuple, build: Callable[[], CvxProblem], reuse: bool) -> CvxProblem:
     if not reuse:
         return build()
-    p = _CACHE.get(key)
-    if p is None:
-        with _LOCK:
-            p = _CACHE.get(key)
-            if p is None:
-                p = build()
-                _CACHE[key] = p
-    return p
+    return _CACHE.get(key, build)
 
 
 def clear_cache() -> None:
