@@ -129,7 +129,7 @@ def _check_finite(a: np.ndarray, where: str, names: Sequence[str] | None,
     if bad.any():
         i = int(np.flatnonzero(bad.ravel())[0])
         label = f" ({names[i]})" if names is not None and i < len(names) else ""
-        raise _err(error, where, f"entry {i}{label} is {a.ravel()[i]!r}; give finite values "
+        raise _err(error, where, f"entry {i}{label} is {float(a.ravel()[i])!r}; give finite values "
                    f"of magnitude at most {MAX_ABS:g}")
 
 

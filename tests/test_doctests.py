@@ -8,6 +8,7 @@ import importlib
 import pytest
 
 MODULES = [
+    "optkin._checks",
     "optkin.mechanism.expr",
     "optkin.mechanism.khalil",
     "optkin.mechanism.core",
