@@ -2,7 +2,8 @@
 
 Whatever the caller passes (a Python int with 400 digits, a string, a nested list, NaN,
 ``1e308``), the converters below either return a finite float64 value of the expected
-shape or raise the project's own error class naming the argument (``where``) and the fix.
+shape or raise the project's own error class naming the argument (``where``) and the fix,
+with the argument's location as data (``path``, see :class:`optkin.errors.OptkinError`).
 They never let ``OverflowError``, ``TypeError`` or a numpy ``ValueError`` escape.
 
 Numeric kernels (LAPACK through numpy) must never receive NaN or inf: some LAPACK builds
@@ -23,43 +24,57 @@ import numpy as np
 from .errors import MechanismError
 
 __all__ = [
+    "MAX_ABS",
     "as_float",
     "as_int",
     "as_vector",
     "as_matrix",
     "finite_matrix",
+    "show",
 ]
 
-#: Largest magnitude accepted for a coordinate, length or angle anywhere in optkin.
-#: Beyond it, squares overflow float64 (1e154 ** 2 = 1e308) and every residual is inf.
+#: Largest magnitude accepted for a coordinate, length, angle, force or option anywhere in
+#: optkin. Beyond it, squares overflow float64 (1e154 ** 2 = 1e308) and every residual is inf.
 MAX_ABS = 1e150
 
-
-def _err(error: type[Exception], where: str, msg: str) -> Exception:
-    return error(f"{where}: {msg}")
+Path = Sequence[str | int]
 
 
-def _scalar(v: Any, where: str, error: type[Exception]) -> float:
+def _err(error: type[Exception], where: str, msg: str, path: Path = ()) -> Exception:
+    """``error("where: msg")``, with ``path`` attached when the class takes one (optkin's)."""
+    try:
+        return error(f"{where}: {msg}", path=tuple(path))  # type: ignore[call-arg]
+    except TypeError:
+        return error(f"{where}: {msg}")
+
+
+def _scalar(v: Any, where: str, error: type[Exception], path: Path) -> float:
     if isinstance(v, bool) or isinstance(v, np.bool_):
-        raise _err(error, where, f"expected a number, got {v!r}")
+        raise _err(error, where, f"expected a number, got {v!r}", path)
     if isinstance(v, numbers.Integral):
         iv = int(v)
         if abs(iv) > MAX_ABS:
             raise _err(error, where, f"the integer {str(iv)[:20]}... is too large "
-                       f"(magnitude above {MAX_ABS:g}); give a number of sensible size")
+                       f"(magnitude above {MAX_ABS:g}); give a number of sensible size", path)
         return float(iv)
     if isinstance(v, numbers.Real):
-        return float(v)
+        try:
+            return float(v)
+        except (OverflowError, TypeError, ValueError):  # e.g. a huge Fraction or Decimal
+            raise _err(error, where, f"cannot represent {_show(v)} as a float", path) from None
     if isinstance(v, (str, bytes)):
-        raise _err(error, where, f"expected a number, got the string {str(v)[:40]!r}")
+        raise _err(error, where, f"expected a number, got the string {str(v)[:40]!r}", path)
     if isinstance(v, numbers.Complex):
-        raise _err(error, where, f"expected a real number, got {v!r}")
-    raise _err(error, where, f"expected a number, got {type(v).__name__}")
+        raise _err(error, where, f"expected a real number, got {v!r}", path)
+    raise _err(error, where, f"expected a number, got {type(v).__name__}", path)
 
 
 def as_float(v: Any, where: str, *, lo: float | None = None, hi: float | None = None,
-             finite: bool = True, error: type[Exception] = MechanismError) -> float:
+             finite: bool = True, error: type[Exception] = MechanismError,
+             path: Path = ()) -> float:
     """``v`` as a float; ``lo``/``hi`` bound it inclusively; NaN is always rejected.
+
+    ``finite=False`` also accepts +-inf (e.g. an option where inf disables a limit).
 
     >>> as_float(3, "tol")
     3.0
@@ -67,74 +82,100 @@ def as_float(v: Any, where: str, *, lo: float | None = None, hi: float | None = 
     Traceback (most recent call last):
     ...
     optkin.errors.MechanismError: tol: expected a number, got the string 'x'
+    >>> as_float(10**400, "qa")
+    Traceback (most recent call last):
+    ...
+    optkin.errors.MechanismError: qa: the integer 10000000000000000000... is too large (magnitude above 1e+150); give a number of sensible size
     """
-    x = _scalar(v, where, error)
+    x = _scalar(v, where, error, path)
     if math.isnan(x) or (finite and not math.isfinite(x)):
-        raise _err(error, where, f"expected a finite number, got {x!r}")
+        raise _err(error, where, f"expected a finite number, got {x!r}", path)
     if finite and abs(x) > MAX_ABS:
-        raise _err(error, where, f"{x:g} is too large (magnitude above {MAX_ABS:g})")
+        raise _err(error, where, f"{x:g} is too large (magnitude above {MAX_ABS:g})", path)
     if lo is not None and x < lo:
-        raise _err(error, where, f"expected a number >= {lo:g}, got {x:g}")
+        raise _err(error, where, f"expected a number >= {lo:g}, got {x:g}", path)
     if hi is not None and x > hi:
-        raise _err(error, where, f"expected a number <= {hi:g}, got {x:g}")
+        raise _err(error, where, f"expected a number <= {hi:g}, got {x:g}", path)
     return x
 
 
 def as_int(v: Any, where: str, *, lo: int | None = None, hi: int | None = None,
-           error: type[Exception] = MechanismError) -> int:
+           error: type[Exception] = MechanismError, path: Path = ()) -> int:
     """``v`` as an int (integral floats such as ``4.0`` accepted); bounds inclusive.
+
+    Integers of magnitude above :data:`MAX_ABS` are rejected even without ``hi``.
 
     >>> as_int(4.0, "starts", lo=1)
     4
+    >>> as_int(2**70, "starts", hi=2**20)
+    Traceback (most recent call last):
+    ...
+    optkin.errors.MechanismError: starts: expected an integer <= 1048576, got 1180591620717411303424
     """
     if isinstance(v, (bool, np.bool_)) or isinstance(v, (str, bytes)):
-        raise _err(error, where, f"expected an integer, got {v!r}")
+        raise _err(error, where, f"expected an integer, got {_show(v)}", path)
     if isinstance(v, numbers.Integral):
         iv = int(v)
     elif isinstance(v, numbers.Real) and math.isfinite(float(v)) and float(v).is_integer():
         iv = int(v)
     else:
-        raise _err(error, where, f"expected an integer, got {str(v)[:40]}")
+        raise _err(error, where, f"expected an integer, got {_show(v)}", path)
     if lo is not None and iv < lo:
-        raise _err(error, where, f"expected an integer >= {lo}, got {iv}")
+        raise _err(error, where, f"expected an integer >= {lo}, got {str(iv)[:24]}", path)
     if hi is not None and iv > hi:
-        raise _err(error, where, f"expected an integer <= {hi}, got {str(iv)[:24]}")
+        raise _err(error, where, f"expected an integer <= {hi}, got {str(iv)[:24]}", path)
+    if abs(iv) > MAX_ABS:
+        raise _err(error, where, f"the integer {str(iv)[:20]}... is too large", path)
     return iv
 
 
-def _to_array(v: Any, where: str, error: type[Exception]) -> np.ndarray:
+def _to_array(v: Any, where: str, error: type[Exception], path: Path) -> np.ndarray:
     if isinstance(v, (str, bytes)):
-        raise _err(error, where, f"expected numbers, got the string {str(v)[:40]!r}")
+        raise _err(error, where, f"expected numbers, got the string {str(v)[:40]!r}", path)
     if isinstance(v, np.ndarray) and v.dtype.kind in "fiu":
         a = v.astype(float, copy=False)
     else:
         try:
             a = np.asarray(v, dtype=float)
         except OverflowError:
-            raise _err(error, where, f"a value is too large (magnitude above {MAX_ABS:g})") from None
-        except (TypeError, ValueError):
+            raise _err(error, where, f"a value is too large (magnitude above {MAX_ABS:g})",
+                       path) from None
+        except (TypeError, ValueError, RecursionError):
             raise _err(error, where, "expected numbers (a list or array of the right shape), "
-                       f"got {_show(v)}") from None
+                       f"got {_show(v)}", path) from None
     return a
 
 
-def _show(v: Any) -> str:
-    s = repr(v)
-    return s if len(s) <= 60 else s[:57] + "..."
+def show(v: Any, limit: int = 60) -> str:
+    """``repr(v)`` cut to ``limit`` characters, for messages (never raises).
+
+    >>> show("-" * 100)
+    "'--------------------------------------------------------..."
+    """
+    try:
+        s = repr(v)
+    except Exception:  # noqa: BLE001 - a repr that fails must not hide the real message
+        s = f"<{type(v).__name__}>"
+    return s if len(s) <= limit else s[:limit - 3] + "..."
+
+
+_show = show
 
 
 def _check_finite(a: np.ndarray, where: str, names: Sequence[str] | None,
-                  error: type[Exception]) -> None:
+                  error: type[Exception], path: Path) -> None:
     bad = ~np.isfinite(a) | (np.abs(np.nan_to_num(a)) > MAX_ABS)
     if bad.any():
         i = int(np.flatnonzero(bad.ravel())[0])
-        label = f" ({names[i]})" if names is not None and i < len(names) else ""
-        raise _err(error, where, f"entry {i}{label} is {float(a.ravel()[i])!r}; give finite values "
-                   f"of magnitude at most {MAX_ABS:g}")
+        x = float(a.ravel()[i])
+        what = "non-finite value" if not math.isfinite(x) else f"value {x:g} too large"
+        at = f"for [{names[i]!r}]" if names is not None and i < len(names) else f"at entry {i}"
+        raise _err(error, where, f"{what} {at}; give finite values of magnitude at most "
+                   f"{MAX_ABS:g}", tuple(path) + ((i,) if a.ndim == 1 else ()))
 
 
 def as_vector(v: Any, where: str, n: int | None = None, *, names: Sequence[str] | None = None,
-              error: type[Exception] = MechanismError) -> np.ndarray:
+              error: type[Exception] = MechanismError, path: Path = ()) -> np.ndarray:
     """``v`` as a finite 1-D float array (of ``n`` entries when given); a new array.
 
     ``names`` (the entries' names, e.g. joint names) make the messages precise.
@@ -144,9 +185,9 @@ def as_vector(v: Any, where: str, n: int | None = None, *, names: Sequence[str] 
     >>> as_vector([1, float("nan")], "qa", 2, names=["t1", "t2"])
     Traceback (most recent call last):
     ...
-    optkin.errors.MechanismError: qa: entry 1 (t2) is nan; give finite values of magnitude at most 1e+150
+    optkin.errors.MechanismError: qa: non-finite value for ['t2']; give finite values of magnitude at most 1e+150
     """
-    a = _to_array(v, where, error)
+    a = _to_array(v, where, error, path)
     if a.ndim == 0 and n in (None, 1):
         a = a.reshape(1)
     if a.ndim != 1 or (n is not None and a.size != n):
@@ -154,23 +195,35 @@ def as_vector(v: Any, where: str, n: int | None = None, *, names: Sequence[str] 
                 else "a list of numbers")
         if names is not None and n is not None:
             want += f" ({', '.join(names)})"
-        raise _err(error, where, f"expected {want}, got shape {a.shape}")
-    _check_finite(a, where, names, error)
+        raise _err(error, where, f"expected {want}, got shape {a.shape}", path)
+    _check_finite(a, where, names, error, path)
     return np.array(a, dtype=float)
 
 
 def as_matrix(v: Any, where: str, shape: tuple[int | None, int | None] | None = None, *,
-              error: type[Exception] = MechanismError) -> np.ndarray:
-    """``v`` as a finite 2-D float array; ``shape`` entries of None match any size."""
-    a = _to_array(v, where, error)
+              error: type[Exception] = MechanismError, path: Path = ()) -> np.ndarray:
+    """``v`` as a finite 2-D float array; ``shape`` entries of None match any size.
+
+    >>> as_matrix([[0, 0], [1, 0], [0, 1]], "base", (3, 2)).shape
+    (3, 2)
+    >>> as_matrix([[0, 0], [1, 0]], "base", (3, 2))
+    Traceback (most recent call last):
+    ...
+    optkin.errors.MechanismError: base: expected a 3x2 array, got shape (2, 2)
+    """
+    a = _to_array(v, where, error, path)
     if a.ndim != 2 or (shape is not None and any(
             s is not None and s != d for s, d in zip(shape, a.shape))):
         want = "x".join("n" if s is None else str(s) for s in shape) if shape else "2-D"
-        raise _err(error, where, f"expected a {want} array, got shape {a.shape}")
-    _check_finite(a, where, None, error)
+        raise _err(error, where, f"expected a {want} array, got shape {a.shape}", path)
+    _check_finite(a, where, None, error, path)
     return np.array(a, dtype=float)
 
 
 def finite_matrix(a: np.ndarray) -> bool:
-    """True when every entry of ``a`` is finite (guard before any LAPACK call)."""
+    """True when every entry of ``a`` is finite (guard before any LAPACK call).
+
+    >>> finite_matrix(np.array([[1.0, np.nan]]))
+    False
+    """
     return bool(np.isfinite(a).all())
