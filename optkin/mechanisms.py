@@ -11,8 +11,11 @@ from typing import Any
 
 import numpy as np
 
+from ._checks import as_float, as_matrix, as_vector
+from ._checks import show as _show
 from .errors import MechanismError
-from .mechanism import Mechanism
+from .mechanism import Leg, Mechanism
+from .mechanism.legs import degenerate_points
 
 __all__ = [
     "rpr3", "rpr4", "rrr3", "five_bar", "four_bar", "stewart_gough", "delta", "sr400", "akr3000",
@@ -22,48 +25,61 @@ __all__ = [
 
 def _points(a: Any, shape: tuple[int, int], name: str) -> np.ndarray:
     try:
-        p = np.asarray(a, dtype=float)
-    except (TypeError, ValueError):
-        raise MechanismError(f"{name}: expected an array of shape {shape}, got {a!r}") from None
-    if p.shape != shape:
-        raise MechanismError(f"{name}: expected an array of shape {shape}, got shape {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise MechanismError(f"{name}: expected finite numbers")
-    return p
+        got = np.shape(a)
+    except (ValueError, TypeError, RecursionError):  # ragged nested lists
+        got = None
+    if got != shape:
+        raise MechanismError(f"{name}: expected an array of shape {shape}, got "
+                             + (f"shape {got}" if got is not None else _show(a)), path=(name,))
+    try:
+        return as_matrix(a, name, shape, path=(name,))
+    except MechanismError as e:
+        raise MechanismError(f"{name}: expected finite numbers; {str(e)[len(name) + 2:]}",
+                             path=(name,)) from None
 
 
 def _lengths(v: Any, n: int, name: str) -> np.ndarray:
     try:
-        a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError):
-        raise MechanismError(f"{name}: expected a positive number or {n} of them, got {v!r}") from None
-    if a.ndim == 0:
-        a = np.full(n, float(a))
+        a = as_vector(v, name, path=(name,))
+    except MechanismError:
+        raise MechanismError(f"{name}: expected a positive number or {n} of them, got "
+                             f"{_show(v)}", path=(name,)) from None
+    if a.size == 1 and np.ndim(v) == 0:
+        a = np.full(n, float(a[0]))
     if a.shape != (n,):
-        raise MechanismError(f"{name}: expected a positive number or {n} of them, got shape {a.shape}")
-    if not np.all(np.isfinite(a)) or np.any(a <= 0):
-        raise MechanismError(f"{name}: lengths must be positive and finite, got {a.tolist()}")
+        raise MechanismError(f"{name}: expected a positive number or {n} of them, got shape "
+                             f"{a.shape}", path=(name,))
+    if np.any(a <= 0):
+        raise MechanismError(f"{name}: lengths must be positive and finite, got {a.tolist()}",
+                             path=(name, int(np.flatnonzero(a <= 0)[0])))
     return a
 
 
 def _positive(name: str, v: Any) -> float:
     try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise MechanismError(f"{name}: expected a positive number, got {v!r}") from None
-    if not np.isfinite(f) or f <= 0:
-        raise MechanismError(f"{name}: expected a positive length, got {v!r}")
+        f = as_float(v, name, path=(name,))
+    except MechanismError:
+        f = -1.0
+    if f <= 0:
+        raise MechanismError(f"{name}: expected a positive length, got {_show(v)}", path=(name,))
     return f
 
 
 def _finite(name: str, v: Any) -> float:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise MechanismError(f"{name}: expected a number, got {v!r}") from None
-    if not np.isfinite(f):
-        raise MechanismError(f"{name}: expected a finite number, got {v!r}")
-    return f
+    return as_float(v, name, path=(name,))
+
+
+
+def _platform(legs: list[dict[str, Any]], platform: str, **kw: Any) -> Mechanism:
+    """``Mechanism.from_legs`` for a factory whose arguments are ``base`` and ``platform``:
+    attachment points that leave no regular configuration are reported against them."""
+    bad = degenerate_points([Leg.from_spec(leg, i) for i, leg in enumerate(legs)], platform)
+    if bad is not None:
+        key, idx, text = bad
+        rows = ", ".join(str(i) for i in idx)
+        key = key or "base"
+        raise MechanismError(f"{key}: rows {rows}: {text}", path=(key,))
+    return Mechanism.from_legs(legs, platform, **kw)
 
 
 def rpr3(base: Any, platform: Any, home: Sequence[float] | None = None) -> Mechanism:
@@ -93,7 +109,7 @@ def rpr3(base: Any, platform: Any, home: Sequence[float] | None = None) -> Mecha
     b = _points(base, (3, 2), "base")
     p = _points(platform, (3, 2), "platform")
     legs = [{"type": "RPR", "base": b[i], "platform": p[i]} for i in range(3)]
-    return Mechanism.from_legs(legs, "planar", name="3-RPR", home=home)
+    return _platform(legs, "planar", name="3-RPR", home=home)
 
 
 def rpr4(base: Any, platform: Any, home: Sequence[float] | None = None) -> Mechanism:
@@ -125,7 +141,7 @@ def rpr4(base: Any, platform: Any, home: Sequence[float] | None = None) -> Mecha
     b = _points(base, (4, 2), "base")
     p = _points(platform, (4, 2), "platform")
     legs = [{"type": "RPR", "base": b[i], "platform": p[i]} for i in range(4)]
-    return Mechanism.from_legs(legs, "planar", name="4-RPR", home=home, redundant=True)
+    return _platform(legs, "planar", name="4-RPR", home=home, redundant=True)
 
 
 def rrr3(
@@ -162,7 +178,7 @@ def rrr3(
         {"type": "RRR", "base": b[i], "platform": p[i], "lengths": [l1[i], l2[i]]}
         for i in range(3)
     ]
-    return Mechanism.from_legs(legs, "planar", name="3-RRR", home=home)
+    return _platform(legs, "planar", name="3-RRR", home=home)
 
 
 def five_bar(L0: float, L1: float, L2: float, L3: float, L4: float) -> Mechanism:
@@ -272,7 +288,7 @@ def stewart_gough(base: Any, platform: Any, home: Sequence[float] | None = None)
     b = _points(base, (6, 3), "base")
     p = _points(platform, (6, 3), "platform")
     legs = [{"type": "UPS", "base": b[i], "platform": p[i]} for i in range(6)]
-    return Mechanism.from_legs(legs, "spatial", name="Stewart-Gough", home=home)
+    return _platform(legs, "spatial", name="Stewart-Gough", home=home)
 
 
 def delta(

@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import as_float, as_int, as_vector
+from .._checks import show as _show
 from ..errors import MechanismError
 from .khalil import KhalilTable
 from .legs import PLATFORMS, Leg, validate_legs
@@ -112,35 +114,41 @@ class Mechanism:
         joints = table.joints
         m = object.__new__(cls)
         m.kind = "khalil"
-        m.name = str(name)
+        m.name = _name(name)
         m.table = table
         m.joint_names = tuple(f.name for f in joints)  # type: ignore[misc]
         m.actuated = tuple(bool(f.mu) for f in joints)
         m.revolute = tuple(f.sigma == 0 for f in joints)
         nact = sum(m.actuated)
         if nact == 0:
-            raise MechanismError("rows: no joint is actuated; set mu=1 on the active joints")
-        m.dof = int(dof) if dof is not None else nact
+            raise MechanismError("rows: no joint is actuated; set mu=1 on the active joints",
+                                 path=("rows",))
+        m.dof = as_int(dof, "dof", path=("dof",)) if dof is not None else nact
         if m.dof != nact:
             raise MechanismError(
                 f"dof: the mechanism is meant to have {m.dof} degrees of freedom but "
-                f"{nact} joints are actuated (mu=1); actuate exactly one joint per degree of freedom"
+                f"{nact} joints are actuated (mu=1); actuate exactly one joint per degree of "
+                "freedom", path=("dof",)
             )
         ee = table.n if end_effector is None else end_effector
         if isinstance(ee, bool) or not isinstance(ee, (int, np.integer)) or not 1 <= ee <= table.n:
             raise MechanismError(
-                f"end_effector: {end_effector!r} is not a tree frame; give a frame number in "
-                f"1..{table.n}"
+                f"end_effector: {_show(end_effector)} is not a tree frame; give a frame number in "
+                f"1..{table.n}", path=("end_effector",)
             )
         m.end_effector = int(ee)
         if task is None:
             order = ("x", "y", "z", "rx", "ry", "rz") if m.dof >= 6 else ("rz", "x", "y", "z", "rx", "ry")
             task = order[: min(6, m.dof)]
-        task = tuple(str(t) for t in task)
+        if isinstance(task, str) or not isinstance(task, (Sequence, np.ndarray)) or len(task) > 6:
+            raise MechanismError(f"task: expected a list of components among "
+                                 f"{list(TASK_COMPONENTS)}, got {_show(task)}", path=("task",))
+        task = tuple(t if isinstance(t, str) else _show(t) for t in task)
         bad = [t for t in task if t not in TASK_COMPONENTS]
         if bad or len(set(task)) != len(task):
             raise MechanismError(
-                f"task: {list(task)} must name distinct components among {list(TASK_COMPONENTS)}"
+                f"task: {list(task)} must name distinct components among {list(TASK_COMPONENTS)}",
+                path=("task",)
             )
         m.task = task
         m.planar = False
@@ -193,10 +201,16 @@ class Mechanism:
             direct model then solves the overdetermined closure in the least-squares sense
             (Gauss-Newton), and the leg lengths must be consistent for it to close.
         """
+        if not isinstance(redundant, (bool, np.bool_, int, np.integer)) or redundant not in (0, 1):
+            raise MechanismError(f"redundant: expected True or False, got {_show(redundant)}",
+                                 path=("redundant",))
+        if params is not None and not isinstance(params, Mapping):
+            raise MechanismError(f"params: expected a mapping, got {_show(params)}",
+                                 path=("params",))
         legs_t = validate_legs(legs, platform, redundant=bool(redundant))
         m = object.__new__(cls)
         m.kind = "legs"
-        m.name = str(name)
+        m.name = _name(name)
         m.legs = legs_t
         m.platform = platform
         dim, dof, coords = PLATFORMS[platform]
@@ -220,12 +234,13 @@ class Mechanism:
         if home is None:
             m.home = None
         else:
-            h = np.asarray(home, dtype=float)
-            if h.shape != (dof,) or not np.all(np.isfinite(h)):
+            try:
+                m.home = as_vector(home, "home", dof, path=("home",))
+            except MechanismError:
                 raise MechanismError(
-                    f"home: expected {dof} finite task coordinates {list(coords)}, got {home!r}"
-                )
-            m.home = h
+                    f"home: expected {dof} finite task coordinates {list(coords)}, got "
+                    f"{_show(home)}", path=("home",)
+                ) from None
         m._spec = {
             "kind": "legs",
             "name": m.name,
@@ -242,46 +257,50 @@ class Mechanism:
     def _home_vector(self, home: Any) -> np.ndarray | None:
         if home is None:
             return None
+        n = len(self.joint_names)
         if isinstance(home, Mapping):
-            unknown = sorted(set(home) - set(self.joint_names))
+            unknown = sorted(set(home) - set(self.joint_names), key=str)
             if unknown:
-                raise MechanismError(f"home: unknown joint(s) {unknown}; joints: {self.joint_names}")
-            try:
-                h = np.array([float(home.get(n, 0.0)) for n in self.joint_names])
-            except (TypeError, ValueError):
-                h = np.full(len(self.joint_names), np.nan)
+                raise MechanismError(f"home: unknown joint(s) {unknown}; joints: {self.joint_names}",
+                                     path=("home", str(unknown[0])))
+            vals: Any = [home.get(k, 0.0) for k in self.joint_names]
         else:
-            try:
-                h = np.asarray(home, dtype=float)
-            except (TypeError, ValueError):
-                h = np.full(0, np.nan)
-        if h.shape != (len(self.joint_names),) or not np.all(np.isfinite(h)):
+            vals = home
+        try:
+            return as_vector(vals, "home", n, path=("home",))
+        except MechanismError:
             raise MechanismError(
-                f"home: expected {len(self.joint_names)} finite joint values "
-                f"{list(self.joint_names)} (a sequence or a {{name: value}} table), got {home!r}")
-        return h
+                f"home: expected {n} finite joint values {list(self.joint_names)} (a sequence "
+                f"or a {{name: value}} table), got {_show(home)}", path=("home",)) from None
 
     def _check_limits(self, limits: Any) -> dict[str, tuple[float, float]]:
         if not limits:
             return {}
         if not isinstance(limits, Mapping):
-            raise MechanismError("limits: expected a mapping joint name -> (lower, upper)")
+            raise MechanismError("limits: expected a mapping joint name -> (lower, upper)",
+                                 path=("limits",))
         out: dict[str, tuple[float, float]] = {}
         for name, lim in limits.items():
             if name not in self.joint_names:
                 raise MechanismError(
-                    f"limits.{name}: unknown joint; joints are {list(self.joint_names)}"
+                    f"limits.{name}: unknown joint; joints are {list(self.joint_names)}",
+                    path=("limits", str(name))
                 )
+            where = f"limits.{name}"
             try:
-                lo, hi = lim
-                lo = -np.inf if lo is None else float(lo)
-                hi = np.inf if hi is None else float(hi)
-            except (TypeError, ValueError):
+                if isinstance(lim, (str, bytes)) or len(lim) != 2:
+                    raise TypeError
+                lo, hi = (sign * np.inf if v is None else
+                          as_float(v, where, finite=False, path=("limits", name))
+                          for sign, v in zip((-1, 1), lim))
+            except (TypeError, MechanismError):
                 raise MechanismError(
-                    f"limits.{name}: expected (lower, upper) numbers or None, got {lim!r}"
+                    f"{where}: expected (lower, upper) numbers or None, got {_show(lim)}",
+                    path=("limits", name)
                 ) from None
-            if np.isnan(lo) or np.isnan(hi) or not lo < hi:
-                raise MechanismError(f"limits.{name}: need lower < upper, got ({lo}, {hi})")
+            if not lo < hi:
+                raise MechanismError(f"{where}: need lower < upper, got ({lo}, {hi})",
+                                     path=("limits", name))
             out[name] = (lo, hi)
         return out
 
@@ -296,7 +315,7 @@ class Mechanism:
         return True
 
     def _finish(self) -> None:
-        blob = json.dumps(_jsonable(self._spec), sort_keys=True).encode()
+        blob = json.dumps(_jsonable(self._spec), sort_keys=True, default=repr).encode()
         object.__setattr__(self, "_key", hashlib.sha256(blob).hexdigest()[:16])
 
     # ------------------------------------------------------------------ views
@@ -361,6 +380,14 @@ class Mechanism:
             )
         return (_rebuild_legs, (spec["legs"], spec["platform"], spec["name"], spec["home"],
                                 spec.get("redundant", False)))
+
+
+
+def _name(name: Any) -> str:
+    """A mechanism name: a string of sensible length."""
+    if not isinstance(name, str) or len(name) > 200:
+        raise MechanismError(f"name: expected a short string, got {_show(name)}", path=("name",))
+    return name
 
 
 def _rebuild_khalil(rows, loops, params, ee, name, task, home, dof, limits=None):

@@ -15,12 +15,16 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import as_float, as_int
+from .._checks import show as _show
 from ..errors import MechanismError
 from .expr import evaluate
 
 __all__ = ["KhalilFrame", "KhalilTable", "khalil_transform", "khalil_inverse", "COLUMNS"]
 
 COLUMNS = ("a", "mu", "sigma", "gamma", "b", "alpha", "d", "theta", "r")
+#: Most frames (rows) a table may have.
+MAX_FRAMES = 200
 _GEOM = ("gamma", "b", "alpha", "d", "theta", "r")
 
 
@@ -93,39 +97,51 @@ class KhalilFrame:
         return khalil_transform(self.gamma, self.b, self.alpha, self.d, th, rr)
 
 
+
 def _row_dict(row: Any, j: int) -> dict[str, Any]:
     where = f"row {j} (frame j={j})"
+    path = ("rows", j - 1)
     if isinstance(row, Mapping):
         d = dict(row)
         if "j" in d:
-            if int(d.pop("j")) != j:
+            jj = d.pop("j")
+            if as_int(jj, f"{where}: j", path=path + ("j",)) != j:
                 raise MechanismError(
-                    f"{where}: j={row['j']} but frames must be listed in order 1, 2, ...; "
-                    f"put this row at position {row['j']}"
+                    f"{where}: j={_show(jj)} but frames must be listed in order 1, 2, ...; "
+                    f"put this row at position {_show(jj)}", path=path + ("j",)
                 )
-        unknown = sorted(set(d) - set(COLUMNS))
+        unknown = sorted(set(d) - set(COLUMNS), key=str)
         if unknown:
             raise MechanismError(
-                f"{where}: unknown column(s) {unknown}; the columns are {list(COLUMNS)}"
+                f"{where}: unknown column(s) {unknown}; the columns are {list(COLUMNS)}",
+                path=path + (str(unknown[0]),)
             )
         missing = [c for c in ("a", "sigma") if c not in d]
         if missing:
-            raise MechanismError(f"{where}: missing column(s) {missing}")
+            raise MechanismError(f"{where}: missing column(s) {missing}", path=path)
         return d
-    if isinstance(row, (Sequence, np.ndarray)) and not isinstance(row, str):
+    if isinstance(row, (Sequence, np.ndarray)) and not isinstance(row, (str, bytes)):
+        if np.ndim(row) != 1 if isinstance(row, np.ndarray) else False:
+            raise MechanismError(f"{where}: expected a mapping or a sequence of 9 values, "
+                                 f"got an array of shape {row.shape}", path=path)
         if len(row) != len(COLUMNS):
             raise MechanismError(
-                f"{where}: expected {len(COLUMNS)} values {list(COLUMNS)}, got {len(row)}"
+                f"{where}: expected {len(COLUMNS)} values {list(COLUMNS)}, got {len(row)}",
+                path=path
             )
         return dict(zip(COLUMNS, row))
-    raise MechanismError(f"{where}: expected a mapping or a sequence of 9 values, got {row!r}")
+    raise MechanismError(f"{where}: expected a mapping or a sequence of 9 values, got "
+                         f"{_show(row)}", path=path)
 
 
-def _int_col(d: Mapping[str, Any], key: str, where: str, default: int | None = None) -> int:
+def _int_col(d: Mapping[str, Any], key: str, where: str, path: tuple,
+             default: int | None = None) -> int:
     v = d.get(key, default)
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer, float)) or float(v) != int(v):
-        raise MechanismError(f"{where}: {key} must be an integer, got {v!r}")
-    return int(v)
+    try:
+        return as_int(v, where, path=path + (key,))
+    except MechanismError:
+        raise MechanismError(f"{where}: {key} must be an integer, got {_show(v)}",
+                             path=path + (key,)) from None
 
 
 class KhalilTable:
@@ -148,30 +164,33 @@ class KhalilTable:
     def __init__(
         self, rows: Sequence[Any], loops: int = 0, params: Mapping[str, float] | None = None
     ) -> None:
+        if params is not None and not isinstance(params, Mapping):
+            raise MechanismError(f"params: expected a mapping name -> value, got {_show(params)}",
+                                 path=("params",))
         params = dict(params or {})
         for k, v in params.items():
             if not isinstance(k, str) or not k.isidentifier():
-                raise MechanismError(f"params: {k!r} is not a valid parameter name")
-            try:
-                fv = float(v)
-            except (TypeError, ValueError):
-                raise MechanismError(f"params.{k}: expected a number, got {v!r}") from None
-            if not np.isfinite(fv):
-                raise MechanismError(f"params.{k}: expected a finite number, got {v!r}")
-            params[k] = fv
+                raise MechanismError(f"params: {_show(k)} is not a valid parameter name",
+                                     path=("params",))
+            params[k] = as_float(v, f"params.{k}", path=("params", k))
         if isinstance(loops, bool) or not isinstance(loops, (int, np.integer)) or loops < 0:
-            raise MechanismError(f"loops: expected a non-negative integer, got {loops!r}")
+            raise MechanismError(f"loops: expected a non-negative integer, got {_show(loops)}",
+                                 path=("loops",))
         if isinstance(rows, (str, bytes)) or not isinstance(rows, (Sequence, np.ndarray)):
-            raise MechanismError("rows: expected a list of rows, one per frame")
+            raise MechanismError("rows: expected a list of rows, one per frame", path=("rows",))
         if len(rows) == 0:
-            raise MechanismError("rows: the table is empty; give one row per frame j = 1..n+2B")
+            raise MechanismError("rows: the table is empty; give one row per frame j = 1..n+2B",
+                                 path=("rows",))
+        if len(rows) > MAX_FRAMES:
+            raise MechanismError(f"rows: {len(rows)} frames; at most {MAX_FRAMES} are supported",
+                                 path=("rows",))
         B = int(loops)
         total = len(rows)
         n = total - 2 * B
         if n < 1:
             raise MechanismError(
                 f"loops: {B} loop(s) need 2*{B} cut/partner frames after at least one tree "
-                f"frame, but the table has only {total} rows"
+                f"frame, but the table has only {total} rows", path=("loops",)
             )
         self.params = params
         self.loops = B
@@ -181,30 +200,34 @@ class KhalilTable:
         for idx, raw in enumerate(rows):
             j = idx + 1
             where = f"row {j} (frame j={j})"
+            at = ("rows", idx)
             d = _row_dict(raw, j)
-            a = _int_col(d, "a", where)
+            a = _int_col(d, "a", where, at)
             if a >= j or a < 0:
                 raise MechanismError(
                     f"{where}: a(j)={a} must satisfy 0 <= a(j) < j (the antecedent frame is "
-                    f"numbered before its successor); renumber the frames from the base outwards"
+                    f"numbered before its successor); renumber the frames from the base outwards",
+                    path=at + ("a",)
                 )
-            sigma = _int_col(d, "sigma", where)
+            sigma = _int_col(d, "sigma", where, at)
             if sigma not in (0, 1, 2):
                 raise MechanismError(
                     f"{where}: sigma={sigma} is not a joint type; use 0 (revolute), "
-                    "1 (prismatic) or 2 (constant frame)"
+                    "1 (prismatic) or 2 (constant frame)", path=at + ("sigma",)
                 )
-            mu = _int_col(d, "mu", where, default=0)
+            mu = _int_col(d, "mu", where, at, default=0)
             if mu not in (0, 1):
-                raise MechanismError(f"{where}: mu={mu}; use 1 for an actuated joint, 0 otherwise")
+                raise MechanismError(f"{where}: mu={mu}; use 1 for an actuated joint, 0 otherwise",
+                                     path=at + ("mu",))
             if sigma == 2 and mu == 1:
                 raise MechanismError(
-                    f"{where}: a constant frame (sigma=2) cannot be actuated; set mu=0"
+                    f"{where}: a constant frame (sigma=2) cannot be actuated; set mu=0",
+                    path=at + ("mu",)
                 )
             if a > n and a != 0:
                 raise MechanismError(
                     f"{where}: a(j)={a} is a cut or partner frame; only tree frames 0..{n} "
-                    "can carry other frames"
+                    "can carry other frames", path=at + ("a",)
                 )
             var_col = "theta" if sigma == 0 else ("r" if sigma == 1 else None)
             geom: dict[str, float] = {}
@@ -217,24 +240,19 @@ class KhalilTable:
                     geom[c] = 0.0
                     continue
                 if v is None:
-                    raise MechanismError(f"{where}: column {c} is empty; give a number")
+                    raise MechanismError(f"{where}: column {c} is empty; give a number",
+                                         path=at + (c,))
                 if isinstance(v, str):
-                    geom[c] = evaluate(v, params, f"{where}, column {c}")
+                    geom[c] = evaluate(v, params, f"{where}, column {c}", at + (c,))
                 else:
-                    try:
-                        geom[c] = float(v)
-                    except (TypeError, ValueError):
-                        raise MechanismError(
-                            f"{where}: column {c} expected a number or text, got {v!r}"
-                        ) from None
-                    if not np.isfinite(geom[c]):
-                        raise MechanismError(f"{where}: column {c} is {v!r}; expected finite")
+                    geom[c] = as_float(v, f"{where}, column {c}", path=at + (c,))
             if sigma != 2 and name is None:
                 name = f"theta{j}" if sigma == 0 else f"r{j}"
             if name is not None:
                 if name in names:
                     raise MechanismError(
-                        f"{where}: joint name {name!r} is used twice; give each joint its own name"
+                        f"{where}: joint name {name!r} is used twice; give each joint its own name",
+                        path=at + (var_col or "theta",)
                     )
                 names.add(name)
             frames.append(
@@ -246,24 +264,25 @@ class KhalilTable:
             if not fk.is_joint:
                 raise MechanismError(
                     f"row {k} (frame j={k}): frame {k} is a cut joint of loop {k - n} but "
-                    "sigma=2; a cut joint must be revolute (0) or prismatic (1)"
+                    "sigma=2; a cut joint must be revolute (0) or prismatic (1)",
+                    path=("rows", k - 1, "sigma")
                 )
             if fk.mu != 0:
                 raise MechanismError(
                     f"row {k} (frame j={k}): cut joint {k} is actuated (mu=1); cut each loop "
-                    "at a passive joint"
+                    "at a passive joint", path=("rows", k - 1, "mu")
                 )
             if fp.sigma != 2:
                 raise MechanismError(
                     f"row {k + B} (frame j={k + B}): cut frame {k} has no partner frame: "
                     f"frame k+B={k + B} must be a constant frame (sigma=2) fixed on the other "
-                    f"link of the cut joint (loops={B})"
+                    f"link of the cut joint (loops={B})", path=("rows", k + B - 1, "sigma")
                 )
             if fp.a == fk.a:
                 raise MechanismError(
                     f"row {k + B} (frame j={k + B}): the partner frame {k + B} sits on link "
                     f"{fp.a}, the same link as cut frame {k}; a(k+B) must be the other link of "
-                    "the cut joint"
+                    "the cut joint", path=("rows", k + B - 1, "a")
                 )
         self.frames: tuple[KhalilFrame, ...] = tuple(frames)
         self.rows_source = [dict(f.source) for f in frames]

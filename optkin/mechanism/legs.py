@@ -26,10 +26,14 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import as_vector
+from .._checks import show as _show
 from ..errors import MechanismError
+from ..numeric import singular_values
 from .geometry import euler_xyz, rot2, rot_x, rot_y, rot_z, wrap_angle
 
-__all__ = ["Leg", "LEG_TYPES", "PLATFORMS", "leg_inverse", "leg_forward", "leg_joints"]
+__all__ = ["Leg", "LEG_TYPES", "PLATFORMS", "MAX_LEGS", "degenerate_points", "leg_inverse",
+           "leg_forward", "leg_joints"]
 
 #: type -> (dimension, joint names, actuated index, number of link lengths)
 LEG_TYPES: dict[str, tuple[int, tuple[str, ...], int, int]] = {
@@ -50,16 +54,16 @@ PLATFORMS: dict[str, tuple[int, int, tuple[str, ...]]] = {
 }
 
 
-def _vec(v: Any, n: int, where: str) -> np.ndarray:
+def _vec(v: Any, n: int, where: str, path: tuple = ()) -> np.ndarray:
+    """``v`` as ``n`` finite numbers, else a MechanismError naming ``where`` (and ``path``)."""
     try:
-        a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError):
-        raise MechanismError(f"{where}: expected {n} numbers, got {v!r}") from None
-    if a.shape != (n,):
-        got = a.size if a.ndim <= 1 else f"an array of shape {a.shape}"
-        raise MechanismError(f"{where}: expected {n} numbers, got {got}")
-    if not np.all(np.isfinite(a)):
-        raise MechanismError(f"{where}: expected finite numbers, got {a.tolist()}")
+        shape = np.shape(v)
+    except (ValueError, TypeError, OverflowError, RecursionError):  # ragged nested lists
+        shape = ()
+    a = as_vector(v, where, path=path) if len(shape) <= 1 else None  # strings, huge, NaN
+    if a is None or a.shape != (n,):
+        got = a.size if a is not None else f"an array of shape {shape}"
+        raise MechanismError(f"{where}: expected {n} numbers, got {got}", path=path)
     return a
 
 
@@ -131,60 +135,73 @@ class Leg:
             spec = fields
         where = f"legs[{i}]"
         if not isinstance(spec, Mapping):
-            raise MechanismError(f"{where}: expected a mapping with type, base, platform")
+            raise MechanismError(f"{where}: expected a mapping with type, base, platform",
+                                 path=("legs", i))
         allowed = {"type", "base", "platform", "lengths", "axis", "arm", "actuated"}
-        unknown = sorted(set(spec) - allowed)
+        unknown = sorted(set(spec) - allowed, key=str)
         if unknown:
-            raise MechanismError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(allowed)}")
-        t = str(spec.get("type", "")).upper()
+            raise MechanismError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(allowed)}",
+                                 path=("legs", i, str(unknown[0])))
+        t = spec.get("type", "")
+        t = t.upper() if isinstance(t, str) else ""
         if t not in LEG_TYPES:
             raise MechanismError(
-                f"{where}.type: unknown leg type {spec.get('type')!r}; supported: "
-                f"{sorted(LEG_TYPES)}"
+                f"{where}.type: unknown leg type {_show(spec.get('type'))}; supported: "
+                f"{sorted(LEG_TYPES)}", path=("legs", i, "type")
             )
         dim, names, act, nlen = LEG_TYPES[t]
         for key in ("base", "platform"):
             if key not in spec:
-                raise MechanismError(f"{where}.{key}: missing; give the joint centre ({dim} numbers)")
-        base = _vec(spec["base"], dim, f"{where}.base")
-        plat = _vec(spec["platform"], dim, f"{where}.platform")
+                raise MechanismError(f"{where}.{key}: missing; give the joint centre ({dim} numbers)",
+                                     path=("legs", i, key))
+        base = _vec(spec["base"], dim, f"{where}.base", ("legs", i, "base"))
+        plat = _vec(spec["platform"], dim, f"{where}.platform", ("legs", i, "platform"))
         if "actuated" in spec and spec["actuated"] is not None:
             a = spec["actuated"]
             if isinstance(a, str):
                 a = names.index(a) if a in names else -2
-            if a != act:
+            if isinstance(a, bool) or not isinstance(a, (int, np.integer)) or a != act:
                 raise MechanismError(
-                    f"{where}.actuated: {spec['actuated']!r} is not supported for {t} legs; "
-                    f"the actuated joint is {names[act]!r} (index {act})"
+                    f"{where}.actuated: {_show(spec['actuated'])} is not supported for {t} legs; "
+                    f"the actuated joint is {names[act]!r} (index {act})",
+                    path=("legs", i, "actuated")
                 )
         lengths: tuple[float, ...] = ()
         if nlen:
             if "lengths" not in spec:
-                raise MechanismError(f"{where}.lengths: {t} legs need {nlen} link lengths")
-            L = _vec(spec["lengths"], nlen, f"{where}.lengths")
+                raise MechanismError(f"{where}.lengths: {t} legs need {nlen} link lengths",
+                                     path=("legs", i, "lengths"))
+            L = _vec(spec["lengths"], nlen, f"{where}.lengths", ("legs", i, "lengths"))
             if np.any(L <= 0):
                 raise MechanismError(
-                    f"{where}.lengths: link lengths must be positive, got {L.tolist()}"
+                    f"{where}.lengths: link lengths must be positive, got {L.tolist()}",
+                    path=("legs", i, "lengths", int(np.flatnonzero(L <= 0)[0]))
                 )
             lengths = tuple(float(v) for v in L)
-        elif spec.get("lengths") not in (None, [], ()):
-            raise MechanismError(f"{where}.lengths: {t} legs have no fixed link lengths")
+        elif not _empty(spec.get("lengths")):
+            raise MechanismError(f"{where}.lengths: {t} legs have no fixed link lengths",
+                                 path=("legs", i, "lengths"))
         axis = arm = None
         if t in ("RUS", "RSS"):
             if "axis" not in spec or "arm" not in spec:
                 raise MechanismError(
                     f"{where}: {t} legs need 'axis' (base revolute axis) and 'arm' (arm "
-                    "direction at theta=0), two orthogonal unit vectors"
+                    "direction at theta=0), two orthogonal unit vectors",
+                    path=("legs", i, "axis" if "axis" not in spec else "arm")
                 )
-            axis = _vec(spec["axis"], 3, f"{where}.axis")
-            arm = _vec(spec["arm"], 3, f"{where}.arm")
-            if abs(np.linalg.norm(axis) - 1) > 1e-9 or abs(np.linalg.norm(arm) - 1) > 1e-9:
-                raise MechanismError(f"{where}: axis and arm must be unit vectors")
+            axis = _vec(spec["axis"], 3, f"{where}.axis", ("legs", i, "axis"))
+            arm = _vec(spec["arm"], 3, f"{where}.arm", ("legs", i, "arm"))
+            for key, vec in (("axis", axis), ("arm", arm)):
+                if abs(np.linalg.norm(vec) - 1) > 1e-9:
+                    raise MechanismError(f"{where}: axis and arm must be unit vectors",
+                                         path=("legs", i, key))
             if abs(axis @ arm) > 1e-9:
-                raise MechanismError(f"{where}: axis and arm must be orthogonal")
+                raise MechanismError(f"{where}: axis and arm must be orthogonal",
+                                     path=("legs", i, "arm"))
         for key in ("axis", "arm"):
             if t not in ("RUS", "RSS") and key in spec:
-                raise MechanismError(f"{where}.{key}: only RUS/RSS legs take {key!r}")
+                raise MechanismError(f"{where}.{key}: only RUS/RSS legs take {key!r}",
+                                     path=("legs", i, key))
         for arr in (base, plat):
             arr.setflags(write=False)
         return cls(t, base, plat, lengths, axis, arm, act)
@@ -318,36 +335,143 @@ def leg_forward(leg: Leg, q: np.ndarray, planar_point: bool = False) -> tuple[np
     raise MechanismError(f"unknown leg type {t!r}")  # pragma: no cover
 
 
+#: Most legs a platform may have (redundant actuation included).
+MAX_LEGS = 64
+
+
 def validate_legs(legs: Sequence[Any], platform: str, redundant: bool = False) -> tuple[Leg, ...]:
     """Validate the legs of a platform: one actuated leg per degree of freedom, or (with
-    ``redundant=True``) more actuated legs than degrees of freedom (redundant actuation)."""
-    if platform not in PLATFORMS:
+    ``redundant=True``) more actuated legs than degrees of freedom (redundant actuation).
+
+    Platforms whose attachment points leave no regular configuration at all (see
+    :func:`degenerate_points`) are rejected here, before any solver sees them.
+    """
+    if not isinstance(platform, str) or platform not in PLATFORMS:
         raise MechanismError(
-            f"platform: unknown platform kind {platform!r}; use one of {sorted(PLATFORMS)}"
+            f"platform: unknown platform kind {_show(platform)}; use one of {sorted(PLATFORMS)}",
+            path=("platform",)
         )
     if isinstance(legs, (str, bytes)) or not isinstance(legs, Sequence) or not legs:
-        raise MechanismError("legs: expected a non-empty list of legs")
+        raise MechanismError("legs: expected a non-empty list of legs", path=("legs",))
+    if len(legs) > MAX_LEGS:
+        raise MechanismError(f"legs: {len(legs)} legs; at most {MAX_LEGS} are supported",
+                             path=("legs",))
     dim, dof, _ = PLATFORMS[platform]
     out = tuple(Leg.from_spec(s, i) for i, s in enumerate(legs))
     for i, leg in enumerate(out):
         if leg.dim != dim:
             raise MechanismError(
                 f"legs[{i}].type: a {leg.type} leg is {'planar' if leg.dim == 2 else 'spatial'} "
-                f"but the platform is {platform!r}"
+                f"but the platform is {platform!r}", path=("legs", i, "type")
             )
     if redundant:
         if len(out) <= dof:
             raise MechanismError(
                 f"legs: a redundantly actuated {platform!r} platform needs more than {dof} "
-                f"actuated legs, got {len(out)}; drop redundant=True for {dof} legs"
+                f"actuated legs, got {len(out)}; drop redundant=True for {dof} legs",
+                path=("legs",)
             )
     elif len(out) != dof:
         hint = "; pass redundant=True for redundant actuation" if len(out) > dof else ""
         raise MechanismError(
             f"legs: a {platform!r} platform has {dof} degrees of freedom and needs {dof} "
-            f"actuated legs, got {len(out)}{hint}"
+            f"actuated legs, got {len(out)}{hint}", path=("legs",)
         )
+    bad = degenerate_points(out, platform)
+    if bad is not None:
+        key, idx, text = bad
+        legs_txt = ", ".join(f"legs[{i}]" + (f".{key}" if key else "") for i in idx)
+        raise MechanismError(f"legs: {legs_txt}: {text}",
+                             path=("legs", idx[-1]) if not key else ("legs",))
     return out
+
+
+def _pts(v: np.ndarray) -> str:
+    return "(" + ", ".join(f"{x:.6g}" for x in v) + ")"
+
+
+def degenerate_points(legs: Sequence[Leg], platform: str
+                      ) -> tuple[str, tuple[int, ...], str] | None:
+    """Attachment points that make every configuration of the platform singular.
+
+    The closure row of a leg is a line (a pure force) through its platform point, and for
+    RPR/UPS/SPS legs through its base point too. When the points are placed so that these
+    lines are dependent at every pose, no closed configuration has a regular W_p: the
+    platform moves with the actuators locked everywhere (a permanent parallel singularity)
+    and the solvers have nothing to converge to. Detected:
+
+    * two RPR/UPS/SPS legs with the same base and the same platform point (one line twice);
+    * planar platforms: all platform points coincide, or all base points of RPR legs do
+      (the lines all pass through one point, about which the platform turns);
+    * spatial platforms: all platform points on one line, or all base points of UPS/SPS
+      legs on one line (every leg line meets it: the platform turns about it);
+    * translational and point platforms with RPR/UPS/SPS legs: the points base - platform
+      coincide (point platforms) or lie on one line (translational): the leg directions
+      stay in one plane.
+
+    Returns None, or ``(key, leg indices, explanation)`` with ``key`` "base" or "platform"
+    (the points at fault), or "" for two legs that are the same.
+    """
+    n = len(legs)
+    prism = [leg.type in ("RPR", "UPS", "SPS") for leg in legs]
+    B = np.array([leg.base for leg in legs], dtype=float)
+    P = np.array([leg.platform for leg in legs], dtype=float)
+    L = max(float(np.abs(B).max()), float(np.abs(P).max()), 1e-300)
+    tol = 1e-12 * L
+    fix = "move them apart so that the legs' lines are independent"
+    def flat(pts: np.ndarray, k: int) -> bool:  # the points span at most k dimensions
+        c = pts - pts.mean(axis=0)
+        s = singular_values(c, "attachment points")
+        return bool(s.size <= k or s[k] <= tol)
+
+    every = tuple(range(n))
+    if platform == "planar":
+        if flat(P, 0):
+            return ("platform", every, f"all platform points coincide at {_pts(P[0])}: the "
+                    "platform turns about that point with the actuators locked, at every pose "
+                    f"(no configuration is regular); {fix}")
+        if all(prism) and flat(B, 0):
+            return ("base", every, f"all base points coincide at {_pts(B[0])}: every leg line "
+                    "passes through it, so the platform turns about it with the actuators "
+                    f"locked, at every pose (no configuration is regular); {fix}")
+    elif platform == "spatial":
+        if flat(P, 1):
+            return ("platform", every, "all platform points lie on one line: the platform "
+                    "turns about that line with the actuators locked, at every pose (no "
+                    f"configuration is regular); {fix}")
+        if all(prism) and flat(B, 1):
+            return ("base", every, "all base points lie on one line: every leg line meets it, "
+                    "so the platform can turn with the actuators locked at every pose (no "
+                    f"configuration is regular); {fix}")
+    elif all(prism):  # translational and point platforms: directions from p to B - P
+        k = 0 if platform == "planar_point" else 1
+        if flat(B - P, k):
+            return ("base", every, "the points base - platform of the legs "
+                    + ("coincide" if k == 0 else "lie on one line")
+                    + (": the legs stay parallel" if k == 0 else
+                       ": the leg directions stay in one plane")
+                    + " and the platform moves with the actuators locked at every pose (no "
+                    f"configuration is regular); {fix}")
+    for i in range(n):
+        for j in range(i + 1, n):
+            if prism[i] and prism[j] and np.abs(B[i] - B[j]).max() <= tol and np.abs(
+                    P[i] - P[j]).max() <= tol:
+                return ("", (i, j), f"legs {i + 1} and {j + 1} have the same base point "
+                        f"{_pts(B[i])} and the same platform point {_pts(P[i])}: one line of "
+                        "force twice, so the platform moves with the actuators locked at every "
+                        f"pose; {fix}")
+    return None
+
+
+
+def _empty(v: Any) -> bool:
+    """None or an empty list / tuple / array (a leg type without fixed lengths)."""
+    if v is None:
+        return True
+    try:
+        return len(v) == 0
+    except TypeError:
+        return False
 
 
 def leg_joints(leg: Leg, R: np.ndarray, p: np.ndarray, a: float) -> np.ndarray:

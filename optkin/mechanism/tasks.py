@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import MAX_ABS, as_matrix, as_vector, show
 from ..errors import MechanismError
 from .geometry import homogeneous, matrix_to_rpy, rot2, rot_x, rot_y, rot_z, rpy_to_matrix
 
@@ -19,12 +20,17 @@ def task_to_pose(mech: Any, t: Any) -> np.ndarray:
     R = Rz(yaw) Ry(pitch) Rx(roll); spatial_translational: (x, y, z). Khalil mechanisms:
     the components named in ``mech.task`` (positions; rotation angles about base axes).
     """
-    t = np.asarray(t, dtype=float).ravel()
-    if t.size != len(mech.task) or not np.all(np.isfinite(t)):
+    try:
+        flat = np.asarray(t, dtype=float).ravel()
+    except (TypeError, ValueError, OverflowError, RecursionError):
+        flat = t  # not numbers: as_vector says so
+    try:
+        t = as_vector(flat, "pose", len(mech.task), path=("pose",))
+    except MechanismError:
         raise MechanismError(
             f"pose: expected a 4x4 matrix or {len(mech.task)} finite task coordinates "
-            f"{list(mech.task)}, got {np.asarray(t).tolist()}"
-        )
+            f"{list(mech.task)} of magnitude at most {MAX_ABS:g}, got {show(t)}", path=("pose",)
+        ) from None
     if mech.kind == "legs":
         plat = mech.platform
         if plat == "planar":
@@ -60,14 +66,23 @@ def pose_to_task(mech: Any, T: np.ndarray) -> np.ndarray:
 def as_pose(mech: Any, pose: Any) -> np.ndarray:
     """A 4x4 pose from either a 4x4 matrix or task coordinates."""
     try:
-        a = np.asarray(pose, dtype=float)
-    except (TypeError, ValueError):
-        raise MechanismError(f"pose: expected numbers, got {pose!r}") from None
-    if a.shape == (4, 4):
-        if not np.all(np.isfinite(a)):
-            raise MechanismError("pose: the 4x4 matrix has non-finite entries")
+        shape = np.shape(pose)
+    except (TypeError, ValueError, RecursionError):
+        shape = None
+    if shape == (4, 4):
+        try:
+            a = as_matrix(pose, "pose", (4, 4), path=("pose",))
+        except MechanismError:
+            raise MechanismError(f"pose: the 4x4 matrix has non-finite entries or entries "
+                                 f"beyond {MAX_ABS:g}", path=("pose",)) from None
         R = a[:3, :3]
-        if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or abs(np.linalg.det(R) - 1) > 1e-6:
-            raise MechanismError("pose: the rotation block of the 4x4 matrix is not a rotation")
+        with np.errstate(over="ignore", invalid="ignore"):
+            orth = np.abs(R.T @ R - np.eye(3)).max()
+        if not orth <= 1e-6 or abs(float(np.linalg.det(R)) - 1) > 1e-6:
+            raise MechanismError("pose: the rotation block of the 4x4 matrix is not a rotation",
+                                 path=("pose",))
+        if np.abs(a[3] - [0, 0, 0, 1]).max() > 1e-9:
+            raise MechanismError("pose: the last row of the 4x4 matrix must be (0, 0, 0, 1)",
+                                 path=("pose",))
         return a
-    return task_to_pose(mech, a)
+    return task_to_pose(mech, pose)
