@@ -10,37 +10,60 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import MechanismError
+from .._checks import MAX_ABS, as_float, as_matrix, as_vector
+from .._checks import show as _show
+from ..errors import MechanismError, NumericError
 from ..model import Model
+from ..numeric import singular_values
 from ..results import KinResult, SolverStats
 
-__all__ = ["merge_options", "check_qa", "check_mechanism", "check_result_of", "newton",
-           "make_result", "parse_guess"]
+__all__ = ["merge_options", "count_option", "check_qa", "check_mechanism", "check_result_of",
+           "newton", "make_result", "parse_guess"]
 
 
 def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: str) -> dict[str, Any]:
     """Merge keyword options over defaults; unknown names warn and are ignored.
 
     An option whose default is a number (tolerances, counts, limits, seeds) must be given
-    a number >= 0 (inf allowed, e.g. to disable a limit), else a :class:`MechanismError`
-    names the option and its default.
+    a real number >= 0 of magnitude at most ``MAX_ABS`` (inf allowed, e.g. to disable a
+    limit), else a :class:`MechanismError` names the option and its default; the value is
+    returned as a float (an int for an integral int). Each function checks its own ranges.
     """
     out = dict(defaults)
     for k, v in given.items():
         if k not in defaults:
             warnings.warn(
-                f"{where}: unknown option {k!r} ignored; known options: {sorted(defaults)}",
+                f"{where}: unknown option {_show(k)} ignored; known options: {sorted(defaults)}",
                 stacklevel=3,
             )
             continue
         d = defaults[k]
-        if isinstance(d, (int, float)) and not isinstance(d, bool) and not (
-                isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
-                and v >= 0):  # NaN fails v >= 0
-            raise MechanismError(
-                f"{where}: option {k} must be a number >= 0 (default {d!r}), got {v!r}")
+        if isinstance(d, (int, float)) and not isinstance(d, bool):
+            try:
+                f = as_float(v, f"{where}: option {k}", lo=0.0, finite=False, path=("options", k))
+                if math.isfinite(f) and f > MAX_ABS:
+                    raise MechanismError("too large")
+            except MechanismError:
+                raise MechanismError(
+                    f"{where}: option {k} must be a number >= 0 (default {d!r}), got {_show(v)}",
+                    path=("options", k)) from None
+            v = int(v) if isinstance(v, (int, np.integer)) else f
         out[k] = v
     return out
+
+
+
+def count_option(opts: Mapping[str, Any], name: str, where: str, lo: int, hi: int,
+                 defaults: Mapping[str, Any]) -> int:
+    """``opts[name]`` as an integer in [lo, hi], else a MechanismError naming the option."""
+    v = opts[name]
+    if isinstance(v, float) and v.is_integer():
+        v = int(v)
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+        raise MechanismError(
+            f"{where}: option {name} must be an integer >= {lo} and <= {hi} (default "
+            f"{defaults[name]!r}), got {_show(opts[name])}", path=("options", name))
+    return int(v)
 
 
 def check_mechanism(mech: Any, where: str) -> None:
@@ -69,20 +92,19 @@ def check_result_of(mech: Any, r: KinResult, where: str) -> None:
 
 
 def check_qa(model: Model, qa: Any) -> np.ndarray:
+    """The active joint values as a finite float vector (one per active joint), else a
+    MechanismError naming the joint; leg lengths must be positive."""
     mech = model.mech
     na = mech.n_actuated
     try:
-        a = np.asarray(qa, dtype=float)
-    except (TypeError, ValueError):
-        raise MechanismError(f"qa: expected {na} numbers, got {qa!r}") from None
-    if a.shape != (na,):
+        shape = np.shape(qa)
+    except (ValueError, TypeError, RecursionError):
+        shape = None
+    if shape is not None and len(shape) == 1 and shape[0] != na:
         raise MechanismError(
             f"qa: expected {na} values for the active joints {list(mech.active_names)}, "
-            f"got shape {a.shape}"
-        )
-    if not np.all(np.isfinite(a)):
-        bad = [mech.active_names[i] for i in np.flatnonzero(~np.isfinite(a))]
-        raise MechanismError(f"qa: non-finite value for {bad}; give finite joint values")
+            f"got shape {shape}", path=("qa",))
+    a = as_vector(qa, "qa", na, names=mech.active_names, path=("qa",))
     if mech.kind == "legs":
         rho = getattr(model, "_rho_index", None)
         if rho is None:
@@ -91,8 +113,8 @@ def check_qa(model: Model, qa: Any) -> np.ndarray:
         if rho.size and np.min(a[rho]) <= 0:
             i = int(rho[np.argmin(a[rho])])
             raise MechanismError(
-                f"qa[{i}] ({mech.active_names[i]}): a leg length must be positive, got {a[i]:g}"
-            )
+                f"qa[{i}] ({mech.active_names[i]}): a leg length must be positive, got {a[i]:g}",
+                path=("qa", i))
     return a
 
 
@@ -103,13 +125,25 @@ def parse_guess(model: Model, qa: np.ndarray, guess: Any) -> np.ndarray:
         return model.default_x(qa)
     if isinstance(guess, KinResult):
         check_result_of(mech, guess, "guess")
-        return np.asarray(guess.x, dtype=float).copy()
+        x = np.asarray(guess.x, dtype=float).copy()
+        if x.shape != (model.nx,) or not np.all(np.isfinite(x)):
+            raise MechanismError("guess: the KinResult has no finite configuration (a failed "
+                                 "solve?); pass a successful result or joint values",
+                                 path=("guess",))
+        return x
     try:
-        g = np.asarray(guess, dtype=float)
-    except (TypeError, ValueError):
-        raise MechanismError(f"guess: expected numbers, got {guess!r}") from None
-    if not np.all(np.isfinite(g)):
-        raise MechanismError("guess: has non-finite entries")
+        ndim = np.ndim(guess)
+    except (ValueError, TypeError, RecursionError):
+        ndim = 1
+    try:
+        g = (as_matrix(guess, "guess", path=("guess",)) if ndim == 2 else
+             as_vector(guess, "guess", path=("guess",)))
+    except MechanismError as e:
+        if "non-finite" in str(e) or "too large" in str(e):
+            raise MechanismError(f"guess: has non-finite entries or entries beyond {MAX_ABS:g}",
+                                 path=("guess",)) from None
+        raise MechanismError(f"guess: expected numbers, got {_show(guess)}",
+                             path=("guess",)) from None
     nq = len(mech.joint_names)
     npas = nq - mech.n_actuated
     if g.shape == (4, 4):
@@ -130,7 +164,8 @@ def parse_guess(model: Model, qa: np.ndarray, guess: Any) -> np.ndarray:
         return model.x_from_pose(task_to_pose(mech, g))
     raise MechanismError(
         f"guess: expected the unknowns x ({model.nx}: {list(model.x_names)}), all joints ({nq}), "
-        f"the passive joints ({npas}), a 4x4 pose or a KinResult; got shape {g.shape}"
+        f"the passive joints ({npas}), a 4x4 pose or a KinResult; got shape {g.shape}",
+        path=("guess",)
     )
 
 
@@ -201,10 +236,10 @@ def make_result(
     finite = bool(np.isfinite(x).all()) and math.isfinite(res)
     Wp = wp_b.reshape((model.nx, model.m)).T
     try:
-        sv = np.linalg.svd(Wp, compute_uv=False) if finite and Wp.size else None
+        sv = singular_values(Wp, "W_p") if finite and Wp.size else None
         cond = float(sv[0] / sv[-1]) if sv is not None and sv[-1] > 0 else float("inf")
-    except np.linalg.LinAlgError:
-        cond = float("inf")
+    except NumericError:  # W_p undefined here (e.g. a leg of zero length)
+        cond = float("nan")
     success = bool(finite and res <= tol)
     if status is None:
         status = "optimal" if success else "infeasible"

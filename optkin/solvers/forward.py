@@ -6,11 +6,13 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import as_float
+from .._checks import show as _show
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
 from ..results import KinResult, SolverStats, ipopt_status
-from .common import check_qa, make_result, merge_options, newton, parse_guess, timer
+from .common import check_qa, count_option, make_result, merge_options, newton, parse_guess, timer
 
 __all__ = ["forward", "FORWARD_DEFAULTS"]
 
@@ -18,9 +20,12 @@ __all__ = ["forward", "FORWARD_DEFAULTS"]
 FORWARD_DEFAULTS: dict[str, Any] = {
     "method": "auto",  # "auto": Newton from the guess, IPOPT if it fails; "ipopt"; "newton"
     "tol": 1e-10,  # max |Phi| for success
-    "max_iter": 50,  # Newton iterations
-    "polish": 8,  # Newton iterations after IPOPT
+    "max_iter": 50,  # Newton iterations (at most MAX_ITER)
+    "polish": 8,  # Newton iterations after IPOPT (at most MAX_ITER)
 }
+
+#: Largest accepted ``max_iter`` and ``polish`` (bounded work per call).
+MAX_ITER = 10_000
 
 
 def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinResult:
@@ -62,15 +67,16 @@ def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinR
     qa = check_qa(model, qa)
     x0 = parse_guess(model, qa, guess)
     tol = _option_number(opts, "tol", 0.0)
-    for k in ("max_iter", "polish"):
-        _option_number(opts, k, -1.0)
+    max_iter, polish = (count_option(opts, k, "forward", 0, MAX_ITER, FORWARD_DEFAULTS)
+                        for k in ("max_iter", "polish"))
     method = opts["method"]
-    if method not in ("auto", "ipopt", "newton"):
+    if not isinstance(method, str) or method not in ("auto", "ipopt", "newton"):
         raise MechanismError(
-            f"forward: option method must be 'auto', 'ipopt' or 'newton', got {method!r}")
+            f"forward: option method must be 'auto', 'ipopt' or 'newton', got {_show(method)}",
+            path=("options", "method"))
     t0 = timer()
     if method in ("auto", "newton"):
-        x, r, nit, ok = newton(model, qa, x0.copy(), tol, int(opts["max_iter"]))
+        x, r, nit, ok = newton(model, qa, x0.copy(), tol, max_iter)
         if ok or method == "newton":
             stats = SolverStats("newton", 0.0, timer() - t0, nit, "converged" if ok else "failed")
             status = None if ok else ("iteration_limit" if np.isfinite(r) else "error")
@@ -86,7 +92,7 @@ def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinR
     raw = str(st.get("return_status", ""))
     x = np.array(sol["x"]).ravel()
     nit = int(st.get("iter_count", 0))
-    x, r, npol, ok = newton(model, qa, x, tol, int(opts["polish"]))
+    x, r, npol, ok = newton(model, qa, x, tol, polish)
     stats = SolverStats(
         "ipopt", getattr(model, "nlp_build_time", 0.0), timer() - t1, nit + npol, raw,
         {"ipopt_iter": nit, "polish_iter": npol, "t_wall_total": st.get("t_wall_total")},
@@ -108,12 +114,12 @@ def _option_number(opts: dict[str, Any], name: str, above: float) -> float:
     """``opts[name]`` as a finite float greater than ``above``, else a MechanismError."""
     v = opts[name]
     try:
-        f = float(v)
-    except (TypeError, ValueError):
+        f = as_float(v, name)
+    except MechanismError:
         f = float("nan")
-    if isinstance(v, bool) or not np.isfinite(f) or f <= above:
+    if not np.isfinite(f) or f <= above:
         what = "a positive number" if above == 0 else "a non-negative number"
         raise MechanismError(
             f"forward: option {name} must be {what} (default {FORWARD_DEFAULTS[name]!r}), "
-            f"got {v!r}")
+            f"got {_show(v)}", path=("options", name))
     return f

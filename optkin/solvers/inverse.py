@@ -25,7 +25,7 @@ from ..model import Model, compiled, get_model
 from ..model import khalil as kh
 from ..model.core import damped_step
 from ..results import KinResult, SolutionSet, SolverStats
-from .common import make_result, merge_options, newton, timer
+from .common import count_option, make_result, merge_options, newton, timer
 
 __all__ = ["inverse", "INVERSE_DEFAULTS", "distinct"]
 
@@ -36,6 +36,10 @@ INVERSE_DEFAULTS: dict[str, Any] = {
     "iters": 60,  # Khalil mechanisms: Newton iterations per start
     "seed": 0,
 }
+
+#: Largest accepted ``starts`` and ``iters`` (bounded work and memory per call).
+MAX_STARTS = 2**16
+MAX_ITERS = 1000
 
 
 def inverse(mech: Mechanism, pose: Any, **options: Any) -> SolutionSet:
@@ -63,11 +67,12 @@ def inverse(mech: Mechanism, pose: Any, **options: Any) -> SolutionSet:
     4
     """
     opts = merge_options(INVERSE_DEFAULTS, options, "inverse")
-    for k in ("starts", "iters", "seed"):
-        if not float(opts[k]).is_integer() or (k == "starts" and opts[k] < 1):
-            raise MechanismError(
-                f"inverse: option {k} must be an integer{' >= 1' if k == 'starts' else ' >= 0'} "
-                f"(default {INVERSE_DEFAULTS[k]!r}), got {opts[k]!r}")
+    for k, lo, hi in (("starts", 1, MAX_STARTS), ("iters", 0, MAX_ITERS), ("seed", 0, 2**63 - 1)):
+        opts[k] = count_option(opts, k, "inverse", lo, hi, INVERSE_DEFAULTS)
+    if not np.isfinite(opts["tol"]):
+        raise MechanismError(f"inverse: option tol must be a finite number >= 0 (default "
+                             f"{INVERSE_DEFAULTS['tol']!r}), got {opts['tol']!r}",
+                             path=("options", "tol"))
     model = get_model(mech)
     T = as_pose(mech, pose)
     if mech.kind == "legs":
