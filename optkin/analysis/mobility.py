@@ -24,13 +24,19 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from ..errors import MechanismError
+from .. import numeric
+from .._checks import as_float, as_int
+from .._checks import show as _show
+from ..errors import MechanismError, NumericError
 from ..mechanism import Mechanism
 from ..model import get_model
 from ..model import khalil as kh
 from ._functions import analysis_functions
 
-__all__ = ["DofReport", "dof", "closed_configurations", "joint_inventory"]
+__all__ = ["DofReport", "dof", "closed_configurations", "joint_inventory", "MAX_SAMPLES"]
+
+#: Largest number of closed configurations :func:`dof` samples.
+MAX_SAMPLES = 1000
 
 
 @dataclass
@@ -164,8 +170,11 @@ def _loop_lambda(mech: Mechanism, samples: int = 4, seed: int = 11) -> list[int]
     out = []
     for j in range(mech.table.loops):
         g = G[6 * j: 6 * j + 6]
+        if not np.isfinite(g).all():  # cannot happen for finite geometry: say so, not hang
+            raise MechanismError(f"the closure rows of loop {j + 1} are not finite at random "
+                                 "joint values; check the table's geometry", path=("rows",))
         scale = max(1.0, float(np.abs(g).max()))
-        out.append(int(np.linalg.matrix_rank(g, tol=1e-9 * scale)))
+        out.append(numeric.rank(g, f"loop {j + 1}", rtol=0.0, atol=1e-9 * scale))
     return out
 
 
@@ -178,6 +187,11 @@ def closed_configurations(
     Returns the configurations (Khalil: all joints; platforms: all joints then the platform
     coordinates x) and the largest residual among them.
     """
+    n = as_int(n, "closed_configurations: n", lo=0, hi=MAX_SAMPLES, path=("n",))
+    seed = as_int(seed, "closed_configurations: seed", lo=0, path=("seed",))
+    tol = as_float(tol, "closed_configurations: tol", lo=0.0, path=("tol",))
+    max_starts = as_int(max_starts, "closed_configurations: max_starts", lo=0,
+                        hi=MAX_SAMPLES * 12, path=("max_starts",))
     f = analysis_functions(mech)
     model = get_model(mech)
     rng = np.random.default_rng(seed)
@@ -218,7 +232,10 @@ def _gauss_newton(fun, jac, z, max_iter: int = 100) -> tuple[np.ndarray, float]:
     for _ in range(max_iter):
         if nr < 1e-26 or not np.isfinite(nr):
             break
-        dz = np.linalg.lstsq(jac(z), -r, rcond=None)[0]
+        try:
+            dz = numeric.lstsq(jac(z), -r, "closure Jacobian")
+        except NumericError:  # the rows are undefined here (a leg of zero length): stop
+            break
         step = 1.0
         nrm = float(np.linalg.norm(dz))
         if nrm > 1.0:
@@ -287,10 +304,19 @@ def dof(mech: Mechanism, samples: int = 5, seed: int = 0, rtol: float = 1e-8) ->
         raise MechanismError(
             f"dof: expected an optkin Mechanism, got {type(mech).__name__}; build one with "
             "optkin.mechanisms.* or Mechanism.from_khalil / from_legs")
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
-        raise MechanismError(f"dof: samples must be a positive integer (default 5), got {samples!r}")
-    if not (isinstance(rtol, (int, float)) and np.isfinite(rtol) and 0 < rtol < 1):
-        raise MechanismError(f"dof: rtol must be a number in (0, 1) (default 1e-8), got {rtol!r}")
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or not (
+            1 <= samples <= MAX_SAMPLES):
+        raise MechanismError(f"dof: samples must be a positive integer <= {MAX_SAMPLES} "
+                             f"(default 5), got {_show(samples)}", path=("samples",))
+    try:
+        rtol_f = as_float(rtol, "rtol")
+    except MechanismError:
+        rtol_f = float("nan")
+    if not 0 < rtol_f < 1:
+        raise MechanismError(f"dof: rtol must be a number in (0, 1) (default 1e-8), got "
+                             f"{_show(rtol)}", path=("rtol",))
+    rtol = rtol_f
+    seed = as_int(seed, "dof: seed", lo=0, path=("seed",))
     inv = joint_inventory(mech)
     freedoms = inv["freedoms"]
     lam = inv["lambda"]
@@ -303,11 +329,14 @@ def dof(mech: Mechanism, samples: int = 5, seed: int = 0, rtol: float = 1e-8) ->
     nullity, ranks = [], []
     for z in confs:
         J = np.array(f.rows_q(z)[1])
-        s = np.linalg.svd(_scaled(mech, J), compute_uv=False)
+        try:
+            s = numeric.singular_values(_scaled(mech, J), "constraint Jacobian")
+        except NumericError:  # undefined at this sample: leave it out
+            continue
         r = rank_of(s, rtol)
         ranks.append(r)
         nullity.append(J.shape[1] - r)
-    ok = bool(confs)
+    ok = bool(nullity)
     mob = int(min(nullity)) if ok else -1
     c = int(max(ranks)) if ok else -1
     idle = int(inv["idle"])

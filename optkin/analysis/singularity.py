@@ -40,7 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import MechanismError
+from .. import numeric
+from .._checks import as_float
+from .._checks import show as _show
+from ..errors import MechanismError, NumericError
 from ..mechanism import Mechanism
 from ..model import get_model
 from ._functions import analysis_functions
@@ -106,6 +109,8 @@ class SingularityReport:
 
     def __repr__(self) -> str:
         t = ", ".join(sorted(self.types)) or "regular"
+        if not self.success and not any(np.isfinite(v) for v in self.margins.values()):
+            return "SingularityReport(undefined; NOT CLOSED)"
         if not self.success:  # the verdicts hold for a configuration that does not close
             t += "; NOT CLOSED"
         return f"SingularityReport({t})"
@@ -126,7 +131,7 @@ def _rel_min(M: np.ndarray, k: int | None = None, ref: float | None = None
     ``ref``, the 2-norm of a larger matrix that does not vanish with it (default M's)."""
     if M.size == 0:
         return float("inf"), np.zeros((M.shape[0], 0)), np.zeros((0, M.shape[1]))
-    U, s, Vt = np.linalg.svd(M)
+    U, s, Vt = numeric.svd(M, "classify")
     n = min(M.shape) if k is None else k
     if n <= 0:
         return float("inf"), U, Vt
@@ -181,6 +186,23 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
     opts = merge_options(CLASSIFY_DEFAULTS, options, "classify")
     rtol, tol2 = (_positive_option(opts, k) for k in ("rtol", "second_order_tol"))
     jac = jacobians(mech, q)
+    if not jac.info.get("defined", True):  # no numeric kernel sees the NaN of an undefined model
+        return _undefined_report(jac, rtol, jac.message)
+    try:
+        return _classify(mech, jac, rtol, tol2)
+    except NumericError as e:
+        return _undefined_report(jac, rtol, f"the singularity tests failed at q: {e}")
+
+
+def _undefined_report(jac: Jacobians, rtol: float, message: str) -> SingularityReport:
+    """The report of a configuration where the verdicts cannot be computed."""
+    return SingularityReport(
+        types=set(), margins={t: float("nan") for t in TYPES},
+        aliases={k: False for k in ("PSFK", "MSFK", "PSIK", "MSIK", "both", "type_1", "type_2")},
+        rtol=rtol, success=False, message=message, jacobians=jac)
+
+
+def _classify(mech: Mechanism, jac: Jacobians, rtol: float, tol2: float) -> SingularityReport:
     model = get_model(mech)
     f = analysis_functions(mech)
     L = model.length
@@ -219,7 +241,7 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
 
     # internal: W_p of [7.49] (model level, all unknowns)
     Wa_s = rs[:, None] * Wa_m * qa_scale[None, :]
-    ref_int = float(np.linalg.norm(np.hstack([Wa_s, Wp_s]), 2))
+    ref_int = numeric.norm2(np.hstack([Wa_s, Wp_s]), "[W_a W_p]")
     m_int, U_int, Vt_int = _rel_min(Wp_s, ref=ref_int)
     margins["internal"] = m_int
     internal = m_int < rtol
@@ -232,7 +254,7 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
         E_scale = np.array([L if i < 3 else 1.0 for i in tw])
         A_s = (jac.A / L) * E_scale[None, :]
         B_s = (jac.B / L) * qa_scale[None, :]
-        m_par, _, Vt_par = _rel_min(A_s, ref=np.linalg.norm(np.hstack([A_s, B_s]), 2))
+        m_par, _, Vt_par = _rel_min(A_s, ref=numeric.norm2(np.hstack([A_s, B_s]), "[A B]"))
         margins["parallel"] = m_par
         if m_par < rtol:
             types.add("parallel")
@@ -250,11 +272,11 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
     else:
         margins["parallel"] = m_int
         if internal:
-            sv = np.linalg.svd(Wp_s, compute_uv=False)
+            sv = numeric.singular_values(Wp_s, "W_p")
             k = int(np.sum(sv < rtol * ref_int)) + (Wp_s.shape[1] - sv.size)
             V = Vt_int[-max(k, 1):]
             Kx = Ks[:, pas]
-            move = float(np.linalg.norm(Kx @ V.T, 2)) / max(float(np.linalg.norm(Ks, 2)), 1e-300)
+            move = numeric.norm2(Kx @ V.T, "K V") / max(numeric.norm2(Ks, "K"), 1e-300)
             if move > np.sqrt(rtol):
                 types.add("parallel")
         # serial: J1 of [7.60]. With M = [H; K_task] split into active columns M_a and
@@ -263,25 +285,25 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
         # basis of range(M_p)). Where W_p is regular this is the rank of J_a's task rows.
         M = np.vstack([Hs, Ks])
         Ma, Mp = M[:, ~pas], M[:, pas]
-        U, sp, _ = np.linalg.svd(Mp, full_matrices=False)
+        U, sp, _ = numeric.svd(Mp, "M_p", full_matrices=False)
         Q = U[:, : rank_of(sp, rtol)]
         Rm = Ma - Q @ (Q.T @ Ma)
-        sR = np.linalg.svd(Rm, compute_uv=False)
-        s1 = float(np.linalg.norm(M, 2))
+        sR = numeric.singular_values(Rm, "J1")
+        s1 = numeric.norm2(M, "[H; K]")
         margins["serial"] = float(sR[-1] / s1) if s1 > 0 and sR.size else 0.0
         if sR.size < Ma.shape[1] or margins["serial"] < rtol:
             types.add("serial")
-            nulls["serial"] = np.linalg.svd(Rm)[2][-1] * qa_scale
+            nulls["serial"] = numeric.svd(Rm, "J1")[2][-1] * qa_scale
 
     # Modern Robotics: configuration space, actuator, end effector
     c = _generic_rank(mech)
-    m_cs, _, _ = _rel_min(Hs, c, ref=np.linalg.norm(np.vstack([Hs, Ks]), 2))
+    m_cs, _, _ = _rel_min(Hs, c, ref=numeric.norm2(np.vstack([Hs, Ks]), "[H; K]"))
     margins["configuration_space"] = m_cs
     if m_cs < rtol:
         types.add("configuration_space")
     Hp_s = Hs[:, pas]
     r = min(int(pas.sum()), c)
-    m_act, _, _ = _rel_min(Hp_s, r, ref=np.linalg.norm(Hs, 2))
+    m_act, _, _ = _rel_min(Hp_s, r, ref=numeric.norm2(Hs, "H"))
     margins["actuator"] = m_act
     actuator = m_act < rtol
     if actuator:
@@ -291,9 +313,9 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
         if deg:
             types.add("actuator_degenerate")
     # end effector: task twist on the tangent space (generic dimension nvar - c)
-    _, _, Vt_h = np.linalg.svd(Hs)
+    _, _, Vt_h = numeric.svd(Hs, "H")
     T = Vt_h[c:].T
-    m_ee, _, Vt_ee = _rel_min(Ks @ T, ref=np.linalg.norm(Ks, 2))
+    m_ee, _, Vt_ee = _rel_min(Ks @ T, ref=numeric.norm2(Ks, "K"))
     margins["end_effector"] = m_ee
     if m_ee < rtol:
         types.add("end_effector")
@@ -312,13 +334,13 @@ def _positive_option(opts: dict[str, Any], name: str) -> float:
     """``opts[name]`` as a positive finite float, else a MechanismError naming the option."""
     v = opts[name]
     try:
-        f = float(v)
-    except (TypeError, ValueError):
+        f = as_float(v, name)
+    except MechanismError:
         f = float("nan")
-    if isinstance(v, bool) or not (np.isfinite(f) and f > 0):
+    if not (np.isfinite(f) and f > 0):
         raise MechanismError(
             f"classify: option {name} must be a positive number (default "
-            f"{CLASSIFY_DEFAULTS[name]!r}), got {v!r}")
+            f"{CLASSIFY_DEFAULTS[name]!r}), got {_show(v)}", path=("options", name))
     return f
 
 
@@ -330,9 +352,9 @@ def _degenerate(jac: Jacobians, model: Any, f: Any, Wp_s: np.ndarray, rs: np.nda
     follow x(s) = x + s v + s^2/2 w only if u_j^T Phi''[v, v] = 0 for every j; a real
     v != 0 in span(V) solving these quadratics means a degenerate singularity.
     """
-    U, s, Vt = np.linalg.svd(Wp_s)
-    if s.size == 0:
+    if Wp_s.size == 0:
         return False, float("nan")
+    U, s, Vt = numeric.svd(Wp_s, "W_p")
     small = int(np.sum(s < atol))
     # at least one direction: this runs only at an actuator singularity (H_p rank-deficient)
     k_r = max(1, small + (Wp_s.shape[1] - s.size))

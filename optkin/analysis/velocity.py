@@ -31,6 +31,9 @@ from typing import Any
 
 import numpy as np
 
+from .. import numeric
+from .._checks import as_float, as_vector
+from .._checks import show as _show
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
@@ -62,37 +65,48 @@ def config_of(mech: Mechanism, q: Any) -> tuple[np.ndarray, np.ndarray, np.ndarr
         check_result_of(mech, q, "q")
         qv = np.asarray(q.q, dtype=float)
         x = np.asarray(q.x, dtype=float)
-        if qv.shape != (nq,) or not np.all(np.isfinite(qv)):
+        if qv.shape != (nq,) or not np.all(np.isfinite(qv)) or not np.all(np.isfinite(x)):
             raise MechanismError(
                 "q: the KinResult has no complete joint vector (failed solve?); pass a "
-                "successful result or all joint values"
+                "successful result or all joint values", path=("q",)
             )
         return qv, qv[act], x
     try:
-        qv = np.asarray(q, dtype=float)
-    except (TypeError, ValueError):
-        raise MechanismError(f"q: expected {nq} joint values or a KinResult, got {q!r}") from None
-    if qv.shape != (nq,):
+        shape = np.shape(q)
+    except (TypeError, ValueError, RecursionError):
+        shape = None
+    if shape is not None and len(shape) >= 1 and shape != (nq,):
         raise MechanismError(
             f"q: expected all {nq} joint values {list(mech.joint_names)} (as in KinResult.q), "
-            f"got shape {qv.shape}"
+            f"got shape {shape}", path=("q",)
         )
-    if not np.all(np.isfinite(qv)):
-        raise MechanismError("q: has non-finite entries; give a closed configuration")
-    return qv, qv[act], model.x_from_q(qv)
+    try:
+        qv = as_vector(q, "q", nq, names=mech.joint_names, path=("q",))
+    except MechanismError as e:
+        if "non-finite" in str(e) or "too large" in str(e):
+            raise MechanismError(f"q: has non-finite entries or entries beyond 1e+150 "
+                                 f"({str(e).split(': ', 1)[1]}); give a closed configuration",
+                                 path=e.path) from None
+        raise MechanismError(f"q: expected {nq} joint values or a KinResult ({str(e)[3:]})",
+                             path=("q",)) from None
+    x = model.x_from_q(qv)
+    if not np.all(np.isfinite(x)):
+        raise MechanismError("q: the platform pose of these joint values is not finite; give a "
+                             "closed configuration", path=("q",))
+    return qv, qv[act], x
 
 
 def _solve(M: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """M^-1 R for square regular M, else the least-squares / minimum-norm solution."""
+    """M^-1 R for square regular M, else the least-squares / minimum-norm solution; NaN
+    (without calling LAPACK) where M or R is not finite (the model undefined there)."""
     if M.shape[0] == 0 or M.shape[1] == 0:
         return np.zeros((M.shape[1],) + R.shape[1:])
-    if M.shape[0] == M.shape[1]:
-        try:
-            if np.linalg.cond(M) < 1e14:
-                return np.linalg.solve(M, R)
-        except np.linalg.LinAlgError:
-            pass
-    return np.linalg.lstsq(M, R, rcond=None)[0]
+    if not (np.isfinite(M).all() and np.isfinite(R).all()):
+        return np.full((M.shape[1],) + R.shape[1:], np.nan)
+    try:
+        return numeric.solve(M, R, "W_p")
+    except MechanismError:  # numeric.NumericError: no convergence or overflow
+        return np.full((M.shape[1],) + R.shape[1:], np.nan)
 
 
 def _quat_rate_matrix(qq: np.ndarray) -> np.ndarray:
@@ -183,11 +197,11 @@ class Jacobians:
     # ------------------------------------------------------------------ rates
     def passive_rates(self, qa_dot: Any) -> np.ndarray:
         """qdot_p = W qdot_a [7.51] (platforms: the platform coordinate rates x_dot)."""
-        return self.W @ np.asarray(qa_dot, dtype=float)
+        return self.W @ _rates("qa_dot", qa_dot, self.mech.active_names)
 
     def x_rates(self, qa_dot: Any) -> np.ndarray:
         """Rates of the model's unknowns x for given active rates."""
-        return self.W_x @ np.asarray(qa_dot, dtype=float)
+        return self.W_x @ _rates("qa_dot", qa_dot, self.mech.active_names)
 
     def joint_rates(self, qa_dot: Any) -> np.ndarray:
         """All joint rates (``mech.joint_names`` order) for given active rates."""
@@ -234,8 +248,8 @@ class Jacobians:
     def passive_accelerations(self, qa_dot: Any, qa_ddot: Any) -> np.ndarray:
         """x_ddot (all unknowns of the model) for active rates and accelerations [7.52]."""
         f = analysis_functions(self.mech)
-        qa_dot = np.asarray(qa_dot, dtype=float)
-        qa_ddot = np.asarray(qa_ddot, dtype=float)
+        qa_dot = _rates("qa_dot", qa_dot, self.mech.active_names)
+        qa_ddot = _rates("qa_ddot", qa_ddot, self.mech.active_names)
         model = get_model(self.mech)
         _, Wp, Wa = (np.array(v) for v in model.jac(self.qa, self.x))
         xd = self.W_x @ qa_dot
@@ -282,7 +296,10 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
     -------
     Jacobians
         ``success=False`` (with a message) when q does not close the loops; the matrices
-        are then evaluated anyway.
+        are then evaluated anyway. Where the model itself is undefined (a prismatic leg of
+        zero length has no direction) ``success=False``, ``status="singular"``,
+        ``info["defined"]`` is False and the matrices that depend on it are NaN; no numeric
+        kernel is called with them.
 
     Examples
     --------
@@ -293,27 +310,36 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
     >>> np.round(jac.W @ [0, 1, 0, 0, 0, 0], 12).tolist()   # [7.41]: theta3dot = -theta2dot
     [-1.0, 1.0]
     """
-    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)) or not (
-            np.isfinite(tol) and tol > 0):
-        raise MechanismError(f"jacobians: tol must be a positive number (default 1e-8), got {tol!r}")
+    tol_in = tol
+    try:
+        tol = as_float(tol, "jacobians: tol", lo=0.0)
+    except MechanismError:
+        tol = 0.0
+    if tol <= 0:
+        raise MechanismError(f"jacobians: tol must be a positive number (default 1e-8), got "
+                             f"{_show(tol_in)}", path=("tol",))
     model = get_model(mech)
     f = analysis_functions(mech)
     qv, qa, x = config_of(mech, q)
     phi_m, Wp_m, Wa_m = (np.array(v) for v in model.jac(qa, x))
+    defined = bool(np.isfinite(phi_m).all() and np.isfinite(Wp_m).all()
+                   and np.isfinite(Wa_m).all())
     res = float(np.max(np.abs(phi_m))) if phi_m.size else 0.0
-    ok = res <= tol
+    ok = res <= tol and defined
     msg = "" if ok else (
         f"q does not close the loops (max |Phi| = {res:.2e} > tol {tol:g}); the matrices are "
         "evaluated there anyway; solve with optkin.forward first"
     )
+    if not defined:
+        msg = _undefined_message(mech, model, phi_m, Wp_m, Wa_m)
     W_x = _solve(Wp_m, -Wa_m)
     act = np.array(mech.actuated)
     tw = twist_rows(mech)
-    info: dict[str, Any] = {}
+    info: dict[str, Any] = {"defined": defined}
     try:
-        info["cond_W_p"] = float(np.linalg.cond(Wp_m)) if Wp_m.size else 1.0
-    except np.linalg.LinAlgError:
-        info["cond_W_p"] = float("inf")
+        info["cond_W_p"] = numeric.cond(Wp_m, "W_p") if Wp_m.size else 1.0
+    except MechanismError:  # not finite: the model is undefined at q
+        info["cond_W_p"] = float("nan")
     if mech.kind == "khalil":
         z = qv
         _, Jq, Kq = (np.array(v) for v in f.rows_q(z))
@@ -379,8 +405,12 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
     if mech.kind == "legs" and mech.platform == "spatial" and all(
             leg.type in ("UPS", "SPS") for leg in mech.legs):
         G = stewart_gough_statics(mech, T)
+    if defined and not all(np.isfinite(a).all() for a in (H, K, J_a)):
+        defined = info["defined"] = ok = False
+        msg = "the velocity model is not finite at q (values too large?); it is undefined there"
+    status = "optimal" if ok else ("singular" if not defined else "infeasible")
     return Jacobians(
-        mech=mech, q=qv, qa=qa, x=x, success=ok, status="optimal" if ok else "infeasible",
+        mech=mech, q=qv, qa=qa, x=x, success=ok, status=status,
         message=msg, residual=res, W_a=W_a, W_p=W_p, W_ac=W_ac, W_pc=W_pc, W_c=W_c, W=W,
         W_x=W_x, H=H, H_a=H_a, H_p=H_p, J_a=J_a, J_s=J_s, K=K, A=A, B=B, G_statics=G,
         twist_names=tuple(TWIST_NAMES[i] for i in tw), row_names=row_names,
@@ -412,7 +442,8 @@ def stewart_gough_statics(mech: Mechanism, T: np.ndarray) -> np.ndarray:
     for leg in mech.legs:
         qi = np.asarray(leg.base, dtype=float)
         Pi = p + R @ np.asarray(leg.platform, dtype=float)
-        n = (Pi - qi) / np.linalg.norm(Pi - qi)
+        d = float(np.linalg.norm(Pi - qi))
+        n = (Pi - qi) / d if d > 0 else np.full(3, np.nan)  # a leg of zero length: undefined
         rows.append(np.concatenate([-np.cross(n, qi), n]))
     return np.array(rows)
 
@@ -420,10 +451,23 @@ def stewart_gough_statics(mech: Mechanism, T: np.ndarray) -> np.ndarray:
 def _rates(name: str, v: Any, names: Any) -> np.ndarray:
     """Joint rates as a float vector of one entry per name, else a MechanismError."""
     try:
-        a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError):
-        a = np.full(0, np.nan)
-    if a.shape != (len(names),) or not np.all(np.isfinite(a)):
+        return as_vector(v, name, len(names), path=(name,))
+    except MechanismError:
         raise MechanismError(
-            f"{name}: expected {len(names)} finite rates, one per joint {list(names)}, got {v!r}")
-    return a
+            f"{name}: expected {len(names)} finite rates, one per joint {list(names)}, got "
+            f"{_show(v)}", path=(name,)) from None
+
+
+def _undefined_message(mech: Mechanism, model: Any, phi: np.ndarray, Wp: np.ndarray,
+                       Wa: np.ndarray) -> str:
+    """Why the model rows or their Jacobian are not finite at a configuration."""
+    bad = ~(np.isfinite(phi.ravel()) & np.isfinite(Wp).all(axis=1) & np.isfinite(Wa).all(axis=1))
+    rows = [model.row_names[i] for i in np.flatnonzero(bad)]
+    legs = [r.split(":")[1] for r in rows if r.startswith("leg:")]
+    if legs and mech.kind == "legs":
+        which = ", ".join(f"leg {k} ({mech.legs[int(k) - 1].type})" for k in legs)
+        return (f"the velocity model is undefined at q: {which} has zero length there (its "
+                "platform point is on its base point), so its direction is undefined; give a "
+                "configuration with every leg of positive length")
+    return (f"the velocity model is undefined at q: the closure rows {rows} or their "
+            "derivatives are not finite there")
