@@ -163,22 +163,26 @@ _show = show
 
 
 def _check_finite(a: np.ndarray, where: str, names: Sequence[str] | None,
-                  error: type[Exception], path: Path) -> None:
-    bad = ~np.isfinite(a) | (np.abs(np.nan_to_num(a)) > MAX_ABS)
+                  error: type[Exception], path: Path, max_abs: float = MAX_ABS) -> None:
+    bad = ~np.isfinite(a) | (np.abs(np.nan_to_num(a)) > max_abs)
     if bad.any():
         i = int(np.flatnonzero(bad.ravel())[0])
         x = float(a.ravel()[i])
         what = "non-finite value" if not math.isfinite(x) else f"value {x:g} too large"
         at = f"for [{names[i]!r}]" if names is not None and i < len(names) else f"at entry {i}"
-        raise _err(error, where, f"{what} {at}; give finite values of magnitude at most "
-                   f"{MAX_ABS:g}", tuple(path) + ((i,) if a.ndim == 1 else ()))
+        limit = f" of magnitude at most {max_abs:g}" if math.isfinite(max_abs) else ""
+        raise _err(error, where, f"{what} {at}; give finite values{limit}",
+                   tuple(path) + ((i,) if a.ndim == 1 else ()))
 
 
 def as_vector(v: Any, where: str, n: int | None = None, *, names: Sequence[str] | None = None,
-              error: type[Exception] = MechanismError, path: Path = ()) -> np.ndarray:
+              error: type[Exception] = MechanismError, path: Path = (),
+              max_abs: float = MAX_ABS) -> np.ndarray:
     """``v`` as a finite 1-D float array (of ``n`` entries when given); a new array.
 
-    ``names`` (the entries' names, e.g. joint names) make the messages precise.
+    ``names`` (the entries' names, e.g. joint names) make the messages precise. Entries of
+    magnitude above ``max_abs`` are rejected (``max_abs=inf``: any finite value, for
+    configurations whose overflow the caller reports as an unsuccessful result).
 
     >>> as_vector([1, 2], "qa", 2)
     array([1., 2.])
@@ -196,12 +200,13 @@ def as_vector(v: Any, where: str, n: int | None = None, *, names: Sequence[str] 
         if names is not None and n is not None:
             want += f" ({', '.join(names)})"
         raise _err(error, where, f"expected {want}, got shape {a.shape}", path)
-    _check_finite(a, where, names, error, path)
+    _check_finite(a, where, names, error, path, max_abs)
     return np.array(a, dtype=float)
 
 
 def as_matrix(v: Any, where: str, shape: tuple[int | None, int | None] | None = None, *,
-              error: type[Exception] = MechanismError, path: Path = ()) -> np.ndarray:
+              error: type[Exception] = MechanismError, path: Path = (),
+              max_abs: float = MAX_ABS) -> np.ndarray:
     """``v`` as a finite 2-D float array; ``shape`` entries of None match any size.
 
     >>> as_matrix([[0, 0], [1, 0], [0, 1]], "base", (3, 2)).shape
@@ -216,7 +221,7 @@ def as_matrix(v: Any, where: str, shape: tuple[int | None, int | None] | None = 
             s is not None and s != d for s, d in zip(shape, a.shape))):
         want = "x".join("n" if s is None else str(s) for s in shape) if shape else "2-D"
         raise _err(error, where, f"expected a {want} array, got shape {a.shape}", path)
-    _check_finite(a, where, None, error, path)
+    _check_finite(a, where, None, error, path, max_abs)
     return np.array(a, dtype=float)
 
 
