@@ -14,7 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import StaticsError
+from .. import numeric
+from .._checks import MAX_ABS, as_int, as_matrix, as_vector, show
+from ..errors import NumericError, StaticsError
 from ..mechanism import Mechanism
 from ..results import SolverStats
 from ..solvers.common import merge_options
@@ -44,8 +46,53 @@ STATICS_DEFAULTS: dict[str, Any] = {
 }
 
 
+#: Most directions, wrench vertices or box components an analysis takes.
+MAX_DIRECTIONS = 4096
+MAX_BOX_COMPONENTS = 12
+#: Most points per axis of the grid of :func:`wrench_feasible_workspace`.
+MAX_GRID = 1000
+#: Relative tolerance of the check of every solver answer against its constraints.
+CHECK_RTOL = 1e-6
+
+
 # --------------------------------------------------------------------------------------
 # inputs
+
+
+def _options(options: Mapping[str, Any], where: str) -> dict[str, Any]:
+    """The statics options merged over :data:`STATICS_DEFAULTS` and range-checked."""
+    opts = merge_options(STATICS_DEFAULTS, options, where)
+
+    def bad(name: str, want: str) -> StaticsError:
+        return StaticsError(f"{where}: option {name} must be {want} (default "
+                            f"{STATICS_DEFAULTS[name]!r}), got {show(opts[name])}",
+                            path=("options", name))
+
+    if not 0 <= opts["sing_tol"] < 1:
+        raise bad("sing_tol", "a number in [0, 1)")
+    if not (np.isfinite(opts["cap"]) and opts["cap"] > 0):
+        raise bad("cap", "a finite number > 0")
+    if not np.isfinite(opts["dir_tol"]):
+        raise bad("dir_tol", "a finite number >= 0")
+    if not (float(opts["chunk"]).is_integer() and 1 <= opts["chunk"] <= 4096):
+        raise bad("chunk", "an integer in [1, 4096]")
+    opts["chunk"] = int(opts["chunk"])
+    if opts["reuse"] not in (True, False) or not isinstance(opts["reuse"], (bool, int, np.bool_)):
+        raise bad("reuse", "True or False")
+    solver = opts["solver"]
+    if solver is not None:
+        import cvxpy as cp
+
+        if not isinstance(solver, str) or solver.upper() not in cp.installed_solvers():
+            raise bad("solver", f"None or an installed cvxpy solver {cp.installed_solvers()}")
+        opts["solver"] = solver.upper()
+    return opts
+
+
+def _pow2(*arrays: np.ndarray) -> float:
+    """The power of two at or above the largest magnitude in ``arrays`` (1 for all zero)."""
+    m = max((float(np.max(np.abs(a))) for a in arrays if np.size(a)), default=0.0)
+    return float(2.0 ** np.ceil(np.log2(m))) if m > 0 else 1.0
 
 
 def limits_of(limits: Any, sm: StaticModel, required: bool = True
@@ -56,13 +103,14 @@ def limits_of(limits: Any, sm: StaticModel, required: bool = True
         if required:
             raise StaticsError(
                 f"limits: required; give one bound per actuator {names} (|tau_i| <= b_i) or "
-                "pairs [lo_i, hi_i]"
+                "pairs [lo_i, hi_i]", path=("limits",)
             )
         return None
     try:
         a = np.asarray(limits, dtype=float)
-    except (TypeError, ValueError):
-        raise StaticsError(f"limits: expected numbers, got {limits!r}") from None
+    except (TypeError, ValueError, OverflowError, RecursionError):
+        raise StaticsError(f"limits: expected numbers, got {show(limits)}",
+                           path=("limits",)) from None
     if a.ndim == 0:
         a = np.full(na, float(a))
     if a.shape == (na,):
@@ -70,7 +118,7 @@ def limits_of(limits: Any, sm: StaticModel, required: bool = True
             bad = [names[i] for i in np.flatnonzero(a < 0)]
             raise StaticsError(
                 f"limits: bounds |tau_i| <= b_i must be >= 0, negative for {bad}; give pairs "
-                "[lo, hi] for one-sided limits"
+                "[lo, hi] for one-sided limits", path=("limits",)
             )
         lo, hi = -a, a.copy()
     elif a.shape == (na, 2):
@@ -78,15 +126,20 @@ def limits_of(limits: Any, sm: StaticModel, required: bool = True
         if np.any(lo > 0) or np.any(hi < 0):
             bad = [names[i] for i in np.flatnonzero((lo > 0) | (hi < 0))]
             raise StaticsError(
-                f"limits: each pair [lo, hi] must contain 0 (lo <= 0 <= hi); not so for {bad}"
+                f"limits: each pair [lo, hi] must contain 0 (lo <= 0 <= hi); not so for {bad}",
+                path=("limits",)
             )
     else:
         raise StaticsError(
             f"limits: expected a number, {na} bounds or {na} pairs [lo, hi] for the actuators "
-            f"{names}, got shape {a.shape}"
+            f"{names}, got shape {a.shape}", path=("limits",)
         )
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        raise StaticsError("limits: must be finite; use a large number for 'unlimited'")
+        raise StaticsError("limits: must be finite; use a large number for 'unlimited'",
+                           path=("limits",))
+    if max(np.abs(lo).max(initial=0.0), np.abs(hi).max(initial=0.0)) > MAX_ABS:
+        raise StaticsError(f"limits: magnitudes above {MAX_ABS:g}; give limits of sensible size",
+                           path=("limits",))
     return lo + 0.0, hi + 0.0
 
 
@@ -96,33 +149,51 @@ def _directions(directions: Any, sm: StaticModel) -> np.ndarray:
         return np.vstack([np.eye(m), -np.eye(m)])
     if isinstance(directions, str):
         if directions not in names and not (directions[:1] == "-" and directions[1:] in names):
-            raise StaticsError(f"directions: unknown component {directions!r}; use one of {names}")
+            raise StaticsError(f"directions: unknown component {show(directions)}; use one of "
+                               f"{names}", path=("directions",))
         directions = [directions]
     if isinstance(directions, (list, tuple)) and directions and all(
             isinstance(d, str) for d in directions):
+        if len(directions) > MAX_DIRECTIONS:
+            raise StaticsError(f"directions: at most {MAX_DIRECTIONS}", path=("directions",))
         rows = []
-        for d in directions:
+        for i, d in enumerate(directions):
             sgn = -1.0 if d.startswith("-") else 1.0
             key = d.lstrip("-+")
             if key not in names:
-                raise StaticsError(f"directions: unknown component {d!r}; use one of {names}")
+                raise StaticsError(f"directions: unknown component {show(d)}; use one of {names}",
+                                   path=("directions", i))
             e = np.zeros(m)
             e[names.index(key)] = sgn
             rows.append(e)
         return np.array(rows)
     try:
-        D = np.atleast_2d(np.asarray(directions, dtype=float))
-    except (TypeError, ValueError):
-        raise StaticsError(f"directions: expected an array (k, {m}), got {directions!r}") from None
-    if D.ndim != 2 or D.shape[1] != m or D.shape[0] == 0:
+        D = np.atleast_2d(as_matrix(np.atleast_2d(_float_array(directions)), "directions",
+                                    error=StaticsError, path=("directions",)))
+    except StaticsError:
         raise StaticsError(
-            f"directions: expected an array (k, {m}) of wrench directions {names}, got shape "
-            f"{np.shape(directions)}"
+            f"directions: expected an array (k, {m}) of finite wrench directions {names} of "
+            f"magnitude at most {MAX_ABS:g}, got {show(directions)}", path=("directions",)
+        ) from None
+    if D.shape[1] != m or D.shape[0] == 0 or D.shape[0] > MAX_DIRECTIONS:
+        raise StaticsError(
+            f"directions: expected an array (k, {m}) of wrench directions {names} with 1 <= k "
+            f"<= {MAX_DIRECTIONS}, got shape {np.shape(directions)}", path=("directions",)
         )
+    D = D / _pow2(D)  # exact: no overflow in the norms below
     n = np.linalg.norm(D, axis=1)
-    if not np.all(np.isfinite(D)) or np.any(n == 0):
-        raise StaticsError("directions: every direction must be finite and non-zero")
+    if np.any(n == 0):
+        raise StaticsError("directions: every direction must be finite and non-zero",
+                           path=("directions",))
     return D / n[:, None]
+
+
+def _float_array(v: Any) -> Any:
+    """``v`` as a float array when numpy can read it, else ``v`` (the converter says why)."""
+    try:
+        return np.asarray(v, dtype=float)
+    except (TypeError, ValueError, OverflowError, RecursionError):
+        return v
 
 
 def box(lower: Any, upper: Any) -> np.ndarray:
@@ -131,7 +202,7 @@ def box(lower: Any, upper: Any) -> np.ndarray:
     Parameters
     ----------
     lower, upper : array (m,)
-        Finite bounds of each wrench component, ``lower <= upper``.
+        Finite bounds of each wrench component, ``lower <= upper`` (at most 12 components).
 
     Returns
     -------
@@ -143,38 +214,52 @@ def box(lower: Any, upper: Any) -> np.ndarray:
     >>> box([-1, 0], [1, 2]).tolist()
     [[-1.0, 0.0], [-1.0, 2.0], [1.0, 0.0], [1.0, 2.0]]
     """
-    lo = np.asarray(lower, dtype=float).ravel()
-    hi = np.asarray(upper, dtype=float).ravel()
-    if lo.shape != hi.shape or np.any(lo > hi) or not np.all(np.isfinite(lo + hi)):
+    try:
+        lo = as_vector(_ravel(lower), "lower", error=StaticsError, path=("lower",))
+        hi = as_vector(_ravel(upper), "upper", error=StaticsError, path=("upper",))
+    except StaticsError as e:
         raise StaticsError(
-            f"wrench box: lower and upper must be finite, of equal length, lower <= upper; "
-            f"got {lo.tolist()} and {hi.tolist()}"
+            f"wrench box: lower and upper must be finite (magnitude at most {MAX_ABS:g}), of "
+            f"equal length, lower <= upper; {e}", path=e.path) from None
+    if lo.shape != hi.shape or np.any(lo > hi) or lo.size > MAX_BOX_COMPONENTS:
+        raise StaticsError(
+            f"wrench box: lower and upper must be finite, of equal length (at most "
+            f"{MAX_BOX_COMPONENTS}), lower <= upper; got {show(lo.tolist())} and "
+            f"{show(hi.tolist())}", path=("upper",)
         )
     return np.array(list(itertools.product(*zip(lo, hi))), dtype=float)
+
+
+def _ravel(v: Any) -> Any:
+    a = _float_array(v)
+    return a.ravel() if isinstance(a, np.ndarray) else a
 
 
 def _wrench_set(ws: Any, sm: StaticModel) -> np.ndarray:
     m, names = sm.m, list(sm.wrench_names)
     if isinstance(ws, Mapping):
-        keys = {k.lower() for k in ws}
+        keys = {str(k).lower() for k in ws}
         lo_k = "lower" if "lower" in keys else "min"
         hi_k = "upper" if "upper" in keys else "max"
         if lo_k not in keys or hi_k not in keys:
             raise StaticsError(
                 "wrench_set: a box is a mapping with 'lower' and 'upper' (one value per "
-                f"component {names})"
+                f"component {names})", path=("wrench_set",)
             )
-        low = {k.lower(): v for k, v in ws.items()}
+        low = {str(k).lower(): v for k, v in ws.items()}
         V = box(low[lo_k], low[hi_k])
     else:
         try:
-            V = np.atleast_2d(np.asarray(ws, dtype=float))
-        except (TypeError, ValueError):
-            raise StaticsError(f"wrench_set: expected numbers, got {ws!r}") from None
-    if V.ndim != 2 or V.shape[1] != m or not np.all(np.isfinite(V)):
+            V = as_matrix(np.atleast_2d(_float_array(ws)), "wrench_set", error=StaticsError,
+                          path=("wrench_set",))
+        except StaticsError:
+            V = np.full((0, 0), np.nan)
+    if V.ndim != 2 or V.shape[1] != m or V.shape[0] > MAX_DIRECTIONS or not np.all(
+            np.isfinite(V)) or V.size == 0:
         raise StaticsError(
             f"wrench_set: expected a wrench ({m},), vertices ({'{'}nv{'}'}, {m}) or a box "
-            f"{{'lower': ..., 'upper': ...}} with components {names}; got shape {V.shape}"
+            f"{{'lower': ..., 'upper': ...}} with components {names}, finite, of magnitude at "
+            f"most {MAX_ABS:g}; got {show(ws)}", path=("wrench_set",)
         )
     return V
 
@@ -254,7 +339,7 @@ def capability(
     >>> r.status, round(float(r.max[0]), 6)   # 3 tau_max r R sin(phi) / L
     ('optimal', 0.285115)
     """
-    opts = merge_options(STATICS_DEFAULTS, options, "capability")
+    opts = _options(options, "capability")
     sm = static_model(mech, q, float(opts["sing_tol"]))
     lo, hi = limits_of(limits, sm)  # type: ignore[misc]
     D = _directions(directions, sm)
@@ -264,8 +349,8 @@ def capability(
 def _cap_of(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, opts: dict[str, Any]) -> float:
     """The capability above which a direction counts as unbounded (serial singularity)."""
     lim = float(max(np.max(hi), np.max(-lo), 1e-300))
-    normA = float(np.linalg.norm(sm.A, 2)) if sm.A.size else 1.0
-    svB = np.linalg.svd(sm.B, compute_uv=False) if sm.B.size else np.ones(1)
+    normA = numeric.norm2(sm.A, "A") if sm.A.size else 1.0
+    svB = numeric.singular_values(sm.B, "B") if sm.B.size else np.ones(1)
     sB = svB[svB > float(opts["sing_tol"]) * max(svB[0], 1e-300)]
     ref = lim * max(1.0, normA) / max(min(1.0, float(sB.min()) if sB.size else 1.0), 1e-12)
     return float(opts["cap"]) * ref
@@ -273,15 +358,57 @@ def _cap_of(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, opts: dict[str, Any
 
 def _capability(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, D: np.ndarray,
                 opts: dict[str, Any]) -> CapabilityResult:
+    """One capability LP, solved on data scaled to the limits (a power of two: exact) and
+    checked against its constraints before it is believed."""
     k = D.shape[0]
+    if sm.singularity == "undefined":
+        return _capability_result(sm, lo, hi, D, np.full(k, np.nan), np.full((k, sm.na), np.nan),
+                                  np.nan, "error", sm.extra["why"], SolverStats(
+                                      "none", 0.0, 0.0, 0, "not solved"), opts)
     cap = _cap_of(sm, lo, hi, opts)
+    sc = _pow2(lo, hi)
     prob = pb.capability_problem(*_shape(sm), k, reuse=bool(opts["reuse"]))
-    vals = _params(sm, lo, hi)
-    vals.update({"D": D.T.copy(), "cap": cap})
+    vals = _params(sm, lo / sc, hi / sc)
+    vals.update({"D": D.T.copy(), "cap": cap / sc})
     status, raw, stats, out = pb.solve(prob, vals, opts["solver"])
-    s = out["s"] if out["s"] is not None else np.full(k, np.nan)
-    tau = out["tau"].T if out["tau"] is not None else np.full((k, sm.na), np.nan)
+    if out["s"] is None or out["L"] is None:
+        s, tau = np.full(k, np.nan), np.full((k, sm.na), np.nan)
+    else:
+        status, raw = _checked(status, raw, _violation(sm, out["L"], D.T * out["s"][None, :],
+                                                       lo / sc, hi / sc))
+        s, tau = out["s"] * sc, out["tau"].T * sc
     return _capability_result(sm, lo, hi, D, s, tau, cap, status, raw, stats, opts)
+
+
+def _violation(sm: StaticModel, L: np.ndarray, target: np.ndarray, lo: np.ndarray,
+               hi: np.ndarray, shrink: Any = 1.0) -> float:
+    """The largest relative violation of the static model by the multipliers ``L`` (columns):
+    A^T L = target, P^T L = 0 and shrink * lo <= -B^T L <= shrink * hi. Data scaled to ~1."""
+    L = np.reshape(L, (sm.A.shape[0], -1))
+    target = np.reshape(target, (sm.m, -1))
+    if not (np.isfinite(L).all() and np.isfinite(target).all()):
+        return float("inf")
+    eq = np.abs(sm.A.T @ L - target).max(initial=0.0)
+    if sm.P.shape[1]:
+        eq = max(eq, np.abs(sm.P.T @ L).max(initial=0.0))
+    eq /= 1.0 + float(np.abs(target).max(initial=0.0))
+    tau = -sm.B.T @ L
+    sh = np.reshape(np.asarray(shrink, dtype=float), (1, -1))
+    with np.errstate(invalid="ignore"):
+        hs, ls = hi[:, None] * sh, lo[:, None] * sh
+        over = np.maximum(np.where(np.isfinite(hs), tau - hs, 0.0),
+                          np.where(np.isfinite(ls), ls - tau, 0.0))
+    bounds = np.abs(np.concatenate([lo, hi]))
+    lim = max(float(bounds[np.isfinite(bounds)].max(initial=0.0)), 1.0)
+    return float(max(eq, over.max(initial=0.0) / (lim * max(1.0, float(np.abs(sh).max())))))
+
+
+def _checked(status: str, raw: str, violation: float) -> tuple[str, str]:
+    """A solver's claim of success stands only when its answer satisfies the constraints."""
+    if status in ("optimal", "inaccurate") and not violation <= CHECK_RTOL:
+        return "error", (f"{raw}, but the answer violates the constraints by {violation:.2e} "
+                         "(relative): not trusted")
+    return status, raw
 
 
 def _capability_result(sm, lo, hi, D, s, tau, cap, status, raw, stats, opts) -> CapabilityResult:
@@ -304,7 +431,9 @@ def _capability_result(sm, lo, hi, D, s, tau, cap, status, raw, stats, opts) -> 
             tau[j] = np.nan
     ok = status in ("optimal", "inaccurate")
     points = np.where(np.isfinite(smax)[:, None], smax[:, None] * D, np.nan)
-    if not ok:
+    if sm.singularity == "undefined":
+        message, out_status = str(raw), "error"
+    elif not ok:
         message = f"the capability LP failed ({raw}); check the limits and the configuration"
         out_status = status
     elif sm.singularity != "none":
@@ -352,25 +481,37 @@ def capability_many(
     list of CapabilityResult
         One per configuration, in the order of ``qs`` (empty for no configuration).
     """
-    opts = merge_options(STATICS_DEFAULTS, options, "capability_many")
-    qs = list(qs)
+    opts = _options(options, "capability_many")
+    if isinstance(qs, (str, bytes)):
+        raise StaticsError("qs: expected a sequence of configurations", path=("qs",))
+    try:
+        qs = list(qs)
+    except TypeError:
+        raise StaticsError("qs: expected a sequence of configurations", path=("qs",)) from None
     if not qs:
         return []
-    if int(chunk) < 1:
-        raise StaticsError(f"chunk: expected a positive integer, got {chunk!r}")
+    chunk = as_int(chunk, "chunk", lo=1, hi=4096, error=StaticsError, path=("chunk",))
     sms = [static_model(mech, q, float(opts["sing_tol"])) for q in qs]
     lo, hi = limits_of(limits, sms[0])  # type: ignore[misc]
     D = _directions(directions, sms[0])
+    bad = [i for i, sm in enumerate(sms) if sm.singularity == "undefined"]
+    if bad:  # those poses alone (a failed result each), the others batched
+        alone = {i: _capability(sms[i], lo, hi, D, opts) for i in bad}
+        good = [q for i, q in enumerate(qs) if i not in alone]
+        rest = iter(capability_many(mech, good, limits, directions, chunk, **options)
+                    if good else [])
+        return [alone[i] if i in alone else next(rest) for i in range(len(qs))]
     k, na = D.shape[0], sms[0].na
     n = min(int(chunk), len(sms))
+    sc = _pow2(lo, hi)
     prob = pb.capability_batch_problem(*_shape(sms[0]), k, n, reuse=bool(opts["reuse"]))
     out: list[CapabilityResult] = []
     for c0 in range(0, len(sms), n):
         block = sms[c0:c0 + n]
         pad = block + [block[-1]] * (n - len(block))
         caps = [_cap_of(sm, lo, hi, opts) for sm in pad]
-        vals: dict[str, Any] = {"lo": lo, "hi": hi, "D": D.T.copy(),
-                                "cap": np.repeat(caps, k)}
+        vals: dict[str, Any] = {"lo": lo / sc, "hi": hi / sc, "D": D.T.copy(),
+                                "cap": np.repeat(caps, k) / sc}
         for i, sm in enumerate(pad):
             vals[f"At{i}"] = sm.A.T.copy()
             vals[f"Bt{i}"] = sm.B.T.copy()
@@ -379,12 +520,16 @@ def capability_many(
         status, raw, stats, res = pb.solve(prob, vals, opts["solver"])
         stats.extra["poses_in_lp"] = n
         for i, sm in enumerate(block):
-            if res["s"] is not None:
+            st, rw = status, raw
+            if res["s"] is not None and res["L"] is not None:
                 s = res["s"][i * k:(i + 1) * k]
-                tau = res["tau"][:, i * k:(i + 1) * k].T
+                st, rw = _checked(status, raw, _violation(
+                    sm, res["L"][:, i * k:(i + 1) * k], D.T * s[None, :], lo / sc, hi / sc))
+                s = s * sc
+                tau = res["tau"][:, i * k:(i + 1) * k].T * sc
             else:
                 s, tau = np.full(k, np.nan), np.full((k, na), np.nan)
-            out.append(_capability_result(sm, lo, hi, D, s, tau, caps[i], status, raw, stats,
+            out.append(_capability_result(sm, lo, hi, D, s, tau, caps[i], st, rw, stats,
                                           opts))
     return out
 
@@ -420,16 +565,23 @@ def capability_polygon(
     CapabilityResult
         The largest wrench along each direction (``max``), as :func:`capability`.
     """
-    opts = merge_options(STATICS_DEFAULTS, options, "capability_polygon")
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 3:
-        raise StaticsError(f"n: expected an integer number of directions >= 3, got {n!r}")
+    opts = _options(options, "capability_polygon")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 3 <= n <= MAX_DIRECTIONS:
+        raise StaticsError(f"n: expected an integer number of directions >= 3 and <= "
+                           f"{MAX_DIRECTIONS}, got {show(n)}", path=("n",))
     sm = static_model(mech, q, float(opts["sing_tol"]))
     names = list(sm.wrench_names)
+    if isinstance(plane, (str, bytes)) or not isinstance(plane, Sequence) or not all(
+            isinstance(c, str) for c in plane):
+        raise StaticsError(f"plane: expected two different components of {names}, got "
+                           f"{show(plane)}", path=("plane",))
     for c in plane:
         if c not in names:
-            raise StaticsError(f"plane: unknown component {c!r}; use two of {names}")
+            raise StaticsError(f"plane: unknown component {c!r}; use two of {names}",
+                               path=("plane",))
     if len(plane) != 2 or plane[0] == plane[1]:
-        raise StaticsError(f"plane: expected two different components of {names}, got {plane}")
+        raise StaticsError(f"plane: expected two different components of {names}, got {plane}",
+                           path=("plane",))
     th = np.linspace(0.0, 2 * np.pi, int(n), endpoint=False)
     D = np.zeros((int(n), sm.m))
     D[:, names.index(plane[0])] = np.cos(th)
@@ -471,7 +623,7 @@ def polytope(mech: Mechanism, q: Any, limits: Any, **options: Any) -> PolytopeRe
     -------
     PolytopeResult
     """
-    opts = merge_options(STATICS_DEFAULTS, options, "polytope")
+    opts = _options(options, "polytope")
     sm = static_model(mech, q, float(opts["sing_tol"]))
     lo, hi = limits_of(limits, sm)  # type: ignore[misc]
     return _polytope(sm, lo, hi, opts)
@@ -484,6 +636,8 @@ def _polytope(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, opts: dict[str, A
     m = sm.m
     empty = dict(vertices=np.zeros((0, m)), equations=np.zeros((0, m + 1)), dimension=0,
                  volume=0.0, wrench_names=sm.wrench_names)
+    if sm.singularity == "undefined":
+        return PolytopeResult(success=False, status="error", message=sm.extra["why"], **empty)
     if sm.G is None:
         return PolytopeResult(success=False, status="singular",
                               message=f"{_sing_message(sm)}: the polytope is unbounded", **empty)
@@ -491,8 +645,10 @@ def _polytope(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, opts: dict[str, A
         raise StaticsError(f"polytope: {sm.na} actuators give 2^{sm.na} corners; at most 16")
     corners = np.array(list(itertools.product(*zip(lo, hi))))
     W = corners @ sm.G.T
-    Ur = np.linalg.svd(sm.G, full_matrices=False)[0]
-    sv = np.linalg.svd(sm.G, compute_uv=False)
+    try:
+        Ur, sv, _ = numeric.svd(sm.G, "G", full_matrices=False)
+    except NumericError as e:
+        return PolytopeResult(success=False, status="error", message=str(e), **empty)
     rank = int(np.sum(sv > float(opts["sing_tol"]) * max(sv[0], 1e-300)))
     Ur = Ur[:, :rank]
     Y = W @ Ur
@@ -506,9 +662,15 @@ def _polytope(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, opts: dict[str, A
             eq_r = np.array([[-1.0, y.min()], [1.0, -y.max()]])
             vol = float(y.max() - y.min())
         else:
-            hull = ConvexHull(Y)
-            idx, eq_r, vol = hull.vertices, hull.equations, float(hull.volume)
-    except QhullError as e:
+            if not np.isfinite(Y).all():
+                raise ValueError("the corners' images are not finite")
+            s_y = _pow2(Y)  # Qhull on data of magnitude ~1 (exact scaling)
+            hull = ConvexHull(Y / s_y)
+            idx, eq_r = hull.vertices, hull.equations.copy()
+            eq_r[:, -1] *= s_y
+            with np.errstate(over="ignore"):
+                vol = float(hull.volume * np.float64(s_y) ** Y.shape[1])
+    except (QhullError, ValueError) as e:
         return PolytopeResult(success=False, status="error", message=f"Qhull failed: {e}",
                               **empty)
     eqs = np.column_stack([eq_r[:, :-1] @ Ur.T, eq_r[:, -1]])
@@ -529,7 +691,7 @@ def _polytope(sm: StaticModel, lo: np.ndarray, hi: np.ndarray, opts: dict[str, A
 
 def _complement(U: np.ndarray) -> np.ndarray:
     m, r = U.shape
-    Q = np.linalg.svd(np.eye(m) - U @ U.T)[0]
+    Q = numeric.svd(np.eye(m) - U @ U.T, "complement")[0]
     return Q[:, : m - r]
 
 
@@ -568,7 +730,7 @@ def feasible(mech: Mechanism, q: Any, wrench_set: Any, limits: Any, **options: A
     >>> r.feasible, round(r.margin, 6)    # 1 - 0.1 / 0.285115
     (True, 0.649264)
     """
-    opts = merge_options(STATICS_DEFAULTS, options, "feasible")
+    opts = _options(options, "feasible")
     sm = static_model(mech, q, float(opts["sing_tol"]))
     lo, hi = limits_of(limits, sm)  # type: ignore[misc]
     V = _wrench_set(wrench_set, sm)
@@ -577,6 +739,11 @@ def feasible(mech: Mechanism, q: Any, wrench_set: Any, limits: Any, **options: A
 
 def _feasible(sm: StaticModel, lo, hi, V, opts) -> FeasibilityResult:
     nv = V.shape[0]
+    if sm.singularity == "undefined":
+        return FeasibilityResult(feasible=False, margin=np.nan, vertices=V,
+                                 tau=np.full((nv, sm.na), np.nan), worst_vertex=-1, success=False,
+                                 status="error", message=sm.extra["why"],
+                                 singularity=sm.singularity, wrench_names=sm.wrench_names)
     U = sm.unresisted
     tol = float(opts["dir_tol"])
     if U.shape[1]:
@@ -590,13 +757,20 @@ def _feasible(sm: StaticModel, lo, hi, V, opts) -> FeasibilityResult:
                          f"{V[bad[0]].tolist()}) are not resisted"),
                 singularity=sm.singularity, wrench_names=sm.wrench_names,
             )
+    sc = _pow2(lo, hi, V)  # the margin is scale-free: solve on data of magnitude ~1
     prob = pb.margin_problem(*_shape(sm), nv, reuse=bool(opts["reuse"]))
-    vals = _params(sm, lo, hi)
-    vals["W"] = V.T.copy()
+    vals = _params(sm, lo / sc, hi / sc)
+    vals["W"] = V.T / sc
     status, raw, stats, out = pb.solve(prob, vals, opts["solver"])
     if status in ("optimal", "inaccurate"):
+        if out["mu"] is None or out["L"] is None:
+            status, raw = "error", f"{raw} without a solution"
+        else:
+            status, raw = _checked(status, raw, _violation(sm, out["L"], V.T / sc, lo / sc,
+                                                           hi / sc, 1 - float(out["mu"])))
+    if status in ("optimal", "inaccurate"):
         mu = float(out["mu"])
-        tau = out["tau"].T
+        tau = out["tau"].T * sc
         with np.errstate(divide="ignore", invalid="ignore"):
             util = np.where(tau >= 0, tau / hi, tau / lo)
         util = np.nan_to_num(util, nan=0.0, posinf=np.inf)
@@ -629,15 +803,20 @@ def _margins_batch(sms: list[StaticModel], lo, hi, V, n: int, opts: dict[str, An
     """Margins of the wrench set V at several poses: one LP of n independent blocks."""
     prob = pb.margin_batch_problem(*_shape(sms[0]), V.shape[0], n, reuse=bool(opts["reuse"]))
     pad = sms + [sms[-1]] * (n - len(sms))
-    vals: dict[str, Any] = {"lo": lo, "hi": hi, "W": V.T.copy()}
+    sc = _pow2(lo, hi, V)
+    vals: dict[str, Any] = {"lo": lo / sc, "hi": hi / sc, "W": V.T / sc}
     for i, sm in enumerate(pad):
         vals[f"At{i}"] = sm.A.T.copy()
         vals[f"Bt{i}"] = sm.B.T.copy()
         if sm.P.shape[1]:
             vals[f"Pt{i}"] = sm.P.T.copy()
     status, _, _, out = pb.solve(prob, vals, opts["solver"])
-    if status in ("optimal", "inaccurate") and out["mu"] is not None:
-        return [float(v) for v in out["mu"][: len(sms)]], ["ok"] * len(sms)
+    if status in ("optimal", "inaccurate") and out["mu"] is not None and out["L"] is not None:
+        nv = V.shape[0]
+        mus = [float(v) for v in out["mu"][: len(sms)]]
+        ok = [_violation(sm, out["L"][:, i * nv:(i + 1) * nv], V.T / sc, lo / sc, hi / sc,
+                         1 - mus[i]) <= CHECK_RTOL for i, sm in enumerate(sms)]
+        return mus, ["ok" if good else "fallback" for good in ok]
     return [np.nan] * len(sms), ["fallback"] * len(sms)
 
 
@@ -680,42 +859,54 @@ def wrench_feasible_workspace(
     from ..solvers.inverse import inverse
 
     check_mechanism(mech, "wrench_feasible_workspace")
-    opts = merge_options(STATICS_DEFAULTS, options, "wrench_feasible_workspace")
+    opts = _options(options, "wrench_feasible_workspace")
     td = mech.task_dim
     tnames = tuple(mech.task)
     grid_shape = None
     if poses is None and td < 2:
         raise StaticsError(
             f"grid: {mech.name} has {td} task coordinate(s) {list(tnames)}, a grid needs two; "
-            f"give poses, an array (N, {td}) of task coordinates")
+            f"give poses, an array (N, {td}) of task coordinates", path=("grid",))
     if isinstance(posture, bool) or not isinstance(posture, (int, np.integer)) or posture < 0:
-        raise StaticsError(f"posture: expected a non-negative integer index, got {posture!r}")
+        raise StaticsError(f"posture: expected a non-negative integer index, got {show(posture)}",
+                           path=("posture",))
     if working_mode is not None:
-        wm_ok = np.asarray(working_mode, dtype=object).ravel()
-        if wm_ok.size != mech.n_actuated or any(v not in (1, -1) for v in wm_ok):
+        try:
+            wm_ok = np.asarray(working_mode, dtype=object).ravel()
+        except (TypeError, ValueError):
+            wm_ok = np.zeros(0, dtype=object)
+        if wm_ok.size != mech.n_actuated or any(
+                isinstance(v, (bool, np.bool_)) or v not in (1, -1) for v in wm_ok):
             raise StaticsError(
                 f"working_mode: expected {mech.n_actuated} signs (+1 or -1), one per actuator "
-                f"{list(mech.active_names)}, got {working_mode!r}")
+                f"{list(mech.active_names)}, got {show(working_mode)}", path=("working_mode",))
     if poses is None:
-        g = _numbers("grid", grid, int, "an integer or two integers (points per axis)")
-        if g.size not in (1, 2):
-            raise StaticsError(f"grid: expected an integer or two integers, got {grid!r}")
-        g = np.broadcast_to(g, (2,))
-        if np.any(g < 2):
-            raise StaticsError(f"grid: expected at least 2 points per axis, got {grid!r}")
+        gl = list(grid) if isinstance(grid, (list, tuple, np.ndarray)) else [grid]
+        if len(gl) not in (1, 2):
+            raise StaticsError(f"grid: expected an integer or two integers, got {show(grid)}",
+                               path=("grid",))
+        g = [as_int(v, "grid", lo=2, hi=MAX_GRID, error=StaticsError, path=("grid",))
+             for v in gl] * (3 - len(gl))
         if bounds is None:
             if mech.kind != "legs":
-                raise StaticsError("bounds: required for a Khalil mechanism ([[lo, hi], [lo, hi]])")
+                raise StaticsError("bounds: required for a Khalil mechanism ([[lo, hi], [lo, hi]])",
+                                   path=("bounds",))
             pts = np.array([leg.base[:2] for leg in mech.legs])
             bounds = np.column_stack([pts.min(axis=0), pts.max(axis=0)])
-        b = _numbers("bounds", bounds, float, "[[lo, hi], [lo, hi]] with lo < hi")
-        if b.shape != (2, 2) or not np.all(np.isfinite(b)) or np.any(b[:, 0] >= b[:, 1]):
-            raise StaticsError(f"bounds: expected [[lo, hi], [lo, hi]] with lo < hi, got {bounds!r}")
+        try:
+            b = as_matrix(_float_array(bounds), "bounds", (2, 2), error=StaticsError)
+        except StaticsError:
+            b = np.full((2, 2), np.nan)
+        if not np.all(np.isfinite(b)) or np.any(b[:, 0] >= b[:, 1]):
+            raise StaticsError(f"bounds: expected [[lo, hi], [lo, hi]] with lo < hi, finite, got "
+                               f"{show(bounds)}", path=("bounds",))
         if fixed is None:
             fixed = mech.home if (mech.kind == "legs" and mech.home is not None) else np.zeros(td)
-        f = _numbers("fixed", fixed, float, f"{td} task coordinates {list(tnames)}").ravel()
-        if f.shape != (td,) or not np.all(np.isfinite(f)):
-            raise StaticsError(f"fixed: expected {td} finite task coordinates {list(tnames)}")
+        try:
+            f = as_vector(_ravel(fixed), "fixed", td, error=StaticsError)
+        except StaticsError:
+            raise StaticsError(f"fixed: expected {td} finite task coordinates {list(tnames)}",
+                               path=("fixed",)) from None
         xs = np.linspace(b[0, 0], b[0, 1], int(g[0]))
         ys = np.linspace(b[1, 0], b[1, 1], int(g[1]))
         X, Y = np.meshgrid(xs, ys, indexing="xy")
@@ -723,10 +914,15 @@ def wrench_feasible_workspace(
         P[:, 0], P[:, 1] = X.ravel(), Y.ravel()
         grid_shape = X.shape
     else:
-        P = np.atleast_2d(_numbers("poses", poses, float, f"an array (N, {td}) of task coordinates"))
-        if P.ndim != 2 or P.shape[1] != td or not np.all(np.isfinite(P)):
+        try:
+            P = as_matrix(np.atleast_2d(_float_array(poses)), "poses", (None, td),
+                          error=StaticsError)
+        except (StaticsError, ValueError):
+            P = np.zeros((0, 0))
+        if P.shape[0] == 0 or P.shape[1] != td or P.shape[0] > MAX_GRID ** 2:
             raise StaticsError(
-                f"poses: expected an array (N, {td}) of finite task coordinates {list(tnames)}")
+                f"poses: expected an array (N, {td}) of finite task coordinates {list(tnames)} "
+                f"(1 <= N <= {MAX_GRID ** 2}), got {show(poses)}", path=("poses",))
     N = P.shape[0]
     margin = np.full(N, np.nan)
     feas = np.zeros(N, dtype=bool)
@@ -750,6 +946,9 @@ def wrench_feasible_workspace(
         V = _wrench_set(wrench_set, first)
         todo = []
         for i, sm in sms.items():
+            if sm.singularity == "undefined":
+                margin[i], pstat[i] = np.nan, "error"
+                continue
             U = sm.unresisted
             if U.shape[1] and any(np.linalg.norm(U.T @ v) > float(opts["dir_tol"]) * max(
                     1.0, np.linalg.norm(v)) for v in V):
@@ -796,11 +995,13 @@ def wrench_feasible_workspace(
 
 
 def _norm_name(norm: Any) -> str:
-    if norm in (2, "2", 2.0, "l2", "two"):
-        return "2"
-    if norm in ("inf", "max", "linf") or (isinstance(norm, float) and np.isinf(norm)):
-        return "inf"
-    raise StaticsError(f"norm: expected 2 or 'inf', got {norm!r}")
+    if isinstance(norm, (str, int, float, np.integer, np.floating)) and not isinstance(
+            norm, (bool, np.bool_)):
+        if norm in (2, "2", 2.0, "l2", "two"):
+            return "2"
+        if norm in ("inf", "max", "linf") or (not isinstance(norm, str) and np.isposinf(norm)):
+            return "inf"
+    raise StaticsError(f"norm: expected 2 or 'inf', got {show(norm)}", path=("norm",))
 
 
 def distribute(
@@ -843,29 +1044,46 @@ def distribute(
     >>> r.success, np.round(r.tau, 4).tolist()
     (True, [0.3269, 0.3784, -0.3269, -0.3784])
     """
-    opts = merge_options(STATICS_DEFAULTS, options, "distribute")
+    opts = _options(options, "distribute")
     sm = static_model(mech, q, float(opts["sing_tol"]))
     nm = _norm_name(norm)
     try:
-        F = np.asarray(wrench, dtype=float).ravel()
-    except (TypeError, ValueError):
-        raise StaticsError(f"wrench: expected {sm.m} numbers, got {wrench!r}") from None
-    if F.shape != (sm.m,) or not np.all(np.isfinite(F)):
+        F = as_vector(_ravel(wrench), "wrench", sm.m, error=StaticsError, path=("wrench",))
+    except StaticsError:
         raise StaticsError(
-            f"wrench: expected {sm.m} finite components {list(sm.wrench_names)}, got "
-            f"{np.asarray(wrench).tolist()}"
-        )
+            f"wrench: expected {sm.m} finite components {list(sm.wrench_names)} of magnitude "
+            f"at most {MAX_ABS:g}, got {show(wrench)}", path=("wrench",)
+        ) from None
     lh = limits_of(limits, sm, required=False)
-    w = np.ones(sm.na) if weights is None else np.asarray(weights, dtype=float).ravel()
-    if w.shape != (sm.na,) or np.any(~np.isfinite(w)) or np.any(w <= 0):
-        raise StaticsError(f"weights: expected {sm.na} positive numbers, got {weights!r}")
+    if sm.singularity == "undefined":
+        nan = np.full(sm.na, np.nan)
+        return DistributionResult(tau=nan, multipliers=np.full(sm.A.shape[0], np.nan), wrench=F,
+                                  norm=nm, value=np.nan, residual=np.nan, utilisation=None,
+                                  success=False, status="error", message=sm.extra["why"],
+                                  singularity=sm.singularity, actuator_names=sm.actuator_names,
+                                  stats=SolverStats("none", 0.0, 0.0, 0, "not solved"))
+    try:
+        w = np.ones(sm.na) if weights is None else as_vector(
+            _ravel(weights), "weights", sm.na, error=StaticsError)
+    except StaticsError:
+        w = np.zeros(0)
+    if w.shape != (sm.na,) or np.any(w <= 0) or np.any(w < 1 / MAX_ABS):
+        raise StaticsError(f"weights: expected {sm.na} positive numbers (in [{1 / MAX_ABS:g}, "
+                           f"{MAX_ABS:g}]), got {show(weights)}", path=("weights",))
     lo, hi = lh if lh is not None else (np.zeros(sm.na), np.zeros(sm.na))
+    # solve on data of magnitude ~1: lambda, tau and the limits scale with the wrench and the
+    # weighted limits by a power of two (exact), the answer is scaled back and checked
+    sc = _pow2(F, lo * w, hi * w)
     prob = pb.distribution_problem(*_shape(sm), nm, lh is not None, reuse=bool(opts["reuse"]))
-    vals = {"At": sm.A.T.copy(), "Bt": (sm.B * w[None, :]).T.copy(), "lo": lo * w,
-            "hi": hi * w, "F": F}
+    vals = {"At": sm.A.T.copy(), "Bt": (sm.B * w[None, :]).T.copy(), "lo": lo * w / sc,
+            "hi": hi * w / sc, "F": F / sc}
     if sm.P.shape[1]:
         vals["Pt"] = sm.P.T.copy()
     status, raw, stats, out = pb.solve(prob, vals, opts["solver"])
+    if status in ("optimal", "inaccurate") and out["lambda"] is not None:
+        status, raw = _checked(status, raw, _violation(
+            sm, out["lambda"], F / sc, lo / sc if lh is not None else np.full(sm.na, -np.inf),
+            hi / sc if lh is not None else np.full(sm.na, np.inf)))
     nan = np.full(sm.na, np.nan)
     if status not in ("optimal", "inaccurate") or out["tau"] is None:
         if status == "infeasible":
@@ -877,12 +1095,13 @@ def distribute(
             msg = f"infeasible: {why}"
         else:
             msg = f"the distribution problem failed ({raw})"
+        msg += f"; wrench {show(F.tolist())}"
         return DistributionResult(tau=nan, multipliers=np.full(sm.A.shape[0], np.nan),
                                   wrench=F, norm=nm, value=np.nan, residual=np.nan,
                                   utilisation=None, success=False, status=status, message=msg,
                                   singularity=sm.singularity, actuator_names=sm.actuator_names,
                                   stats=stats)
-    lam = out["lambda"]
+    lam = out["lambda"] * sc
     tau = -sm.B.T @ lam
     resid = float(np.max(np.abs(sm.A.T @ lam - F))) if sm.m else 0.0
     value = float(np.linalg.norm(w * tau, 2 if nm == "2" else np.inf))
@@ -900,11 +1119,3 @@ def distribute(
                               status=status if sm.singularity == "none" else "singular",
                               message=msg, singularity=sm.singularity,
                               actuator_names=sm.actuator_names, stats=stats)
-
-
-def _numbers(name: str, v: Any, dtype: type, expected: str) -> np.ndarray:
-    """``np.asarray(v, dtype)``, or a StaticsError naming ``name`` and what was expected."""
-    try:
-        return np.asarray(v, dtype=dtype)
-    except (TypeError, ValueError):
-        raise StaticsError(f"{name}: expected {expected}, got {v!r}") from None

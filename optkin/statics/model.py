@@ -65,9 +65,12 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .. import numeric
 from .._cache import KeyedCache
+from .._checks import as_vector
+from .._checks import show as _show
 from ..analysis._functions import _twist_jacobian
-from ..errors import MechanismError
+from ..errors import MechanismError, NumericError, StaticsError
 from ..mechanism import Mechanism
 from ..model import Model, get_model
 from ..results import KinResult, _jsonable
@@ -135,7 +138,9 @@ class StaticModel:
     free_wrenches : array (m, k)
         Orthonormal wrenches carried without actuator force (serial singularity when k > 0).
     singularity : str
-        ``"none"``, ``"parallel"``, ``"serial"`` or ``"parallel+serial"``.
+        ``"none"``, ``"parallel"``, ``"serial"`` or ``"parallel+serial"``; ``"undefined"``
+        where the model has no finite derivative (``extra["why"]`` says why); analyses of
+        such a model return ``success=False``.
     cond : float
         Condition number of the part of the constraint that fixes the platform ([A P]);
         large near a parallel singularity.
@@ -175,17 +180,16 @@ class StaticModel:
 
         Raises :class:`~optkin.errors.StaticsError` at a serial singularity (G undefined).
         """
-        from ..errors import StaticsError
-
         try:
-            t = np.asarray(tau, dtype=float).ravel()
-        except (TypeError, ValueError):
-            t = np.full(0, np.nan)
-        if t.shape != (self.na,) or not np.all(np.isfinite(t)):
+            t = as_vector(tau, "tau", self.na, error=StaticsError, path=("tau",))
+        except StaticsError:
             raise StaticsError(
                 f"tau: expected {self.na} finite actuator forces {list(self.actuator_names)}, "
-                f"got {tau!r}"
-            )
+                f"got {_show(tau)}", path=("tau",)
+            ) from None
+        if self.singularity == "undefined":
+            raise StaticsError(f"wrench: {self.extra.get('why', 'the static model is undefined')}",
+                               path=("tau",))
         if self.G is None:
             raise StaticsError(
                 "wrench: the static map F = G tau is undefined at this serial singularity "
@@ -221,19 +225,21 @@ def _config(model: Model, q: Any) -> tuple[np.ndarray, np.ndarray]:
             raise MechanismError(
                 f"q: the KinResult did not close the loops (status {q.status!r}, max |Phi| = "
                 f"{q.residual:.2e}); statics needs a closed configuration: pass a successful "
-                "result of optkin.forward / optkin.inverse")
-        return np.asarray(q.qa, dtype=float), np.asarray(q.x, dtype=float)
-    try:
-        qq = np.asarray(q, dtype=float)
-    except (TypeError, ValueError):
-        raise MechanismError(f"q: expected joint values or a KinResult, got {q!r}") from None
+                "result of optkin.forward / optkin.inverse", path=("q",))
+        qa, x = np.asarray(q.qa, dtype=float), np.asarray(q.x, dtype=float)
+        if not (np.isfinite(qa).all() and np.isfinite(x).all()):
+            raise MechanismError("q: the KinResult has non-finite joint values", path=("q",))
+        return qa, x
     nq = len(mech.joint_names)
-    if qq.shape != (nq,) or not np.all(np.isfinite(qq)):
+    try:
+        qq = as_vector(q, "q", nq, names=mech.joint_names, path=("q",), max_abs=np.inf)
+    except MechanismError:
         raise MechanismError(
             f"q: expected {nq} finite joint values {list(mech.joint_names)} (KinResult.q) or "
-            f"a KinResult, got shape {qq.shape}"
-        )
-    return model.qa_of(qq), model.x_from_q(qq)
+            f"a KinResult, got {_show(q)}", path=("q",)
+        ) from None
+    with np.errstate(all="ignore"):
+        return model.qa_of(qq), model.x_from_q(qq)
 
 
 def _quat_rate(quat: np.ndarray) -> np.ndarray:
@@ -263,7 +269,7 @@ def _null(M: np.ndarray, tol: float) -> np.ndarray:
         return np.zeros((0, 0))
     if M.shape[0] == 0:
         return np.eye(M.shape[1])
-    _, s, Vt = np.linalg.svd(M)
+    _, s, Vt = numeric.svd(M, "static model")
     smax = s[0] if s.size else 0.0
     rank = int(np.sum(s > tol * max(smax, 1e-300)))
     return Vt[rank:].T.copy()
@@ -273,7 +279,7 @@ def _range(M: np.ndarray, tol: float, scale: float) -> np.ndarray:
     """Orthonormal basis of the range of M (singular values > tol * scale)."""
     if M.size == 0:
         return np.zeros((M.shape[0], 0))
-    U, s, _ = np.linalg.svd(M, full_matrices=False)
+    U, s, _ = numeric.svd(M, "static model", full_matrices=False)
     rank = int(np.sum(s > tol * max(scale, 1e-300)))
     return U[:, :rank].copy()
 
@@ -329,19 +335,35 @@ def static_model(mech: Mechanism, q: Any, sing_tol: float = SING_TOL) -> StaticM
         A = np.vstack([np.eye(m), np.zeros((r, m))])
         B = np.vstack([-Ja[rows], Wa])
         P = np.vstack([-Jx[rows], Wp])
-    return _assemble(A, B, P, names, tuple(mech.active_names), sing_tol)
+    act = tuple(mech.active_names)
+    if not all(np.isfinite(M).all() for M in (A, B, P)):
+        return _undefined(A, B, P, names, act, sing_tol, "the closure rows have no finite "
+                          "derivative at q (a leg of zero length, or values that overflow)")
+    try:
+        return _assemble(A, B, P, names, act, sing_tol)
+    except NumericError as e:
+        return _undefined(A, B, P, names, act, sing_tol, str(e))
+
+
+def _undefined(A, B, P, names, act_names, sing_tol, why: str) -> StaticModel:
+    """The static model of a configuration where it does not exist: no numeric kernel runs,
+    ``singularity="undefined"``, and every analysis of it returns ``success=False``."""
+    m = A.shape[1]
+    return StaticModel(A, B, P, tuple(names), tuple(act_names), None, None, np.zeros((m, 0)),
+                       np.zeros((m, 0)), "undefined", float("nan"), sing_tol,
+                       {"why": f"the static model is undefined here: {why}"})
 
 
 def _assemble(A, B, P, names, act_names, sing_tol) -> StaticModel:
     m, na = A.shape[1], B.shape[1]
     AP = np.hstack([A, P])
-    sv = np.linalg.svd(AP, compute_uv=False) if AP.size else np.zeros(0)
+    sv = numeric.singular_values(AP, "[A P]") if AP.size else np.zeros(0)
     # parallel singularity: twists t with A t + P qp_dot = 0
     Nap = _null(AP, sing_tol)
     unres = _range(Nap[:m], sing_tol, 1.0) if Nap.size else np.zeros((m, 0))
     # serial singularity: multipliers with B^T l = 0 and P^T l = 0 but A^T l != 0
     Nbp = _null(np.hstack([B, P]).T, sing_tol)
-    scaleA = float(np.linalg.norm(A, 2)) if A.size else 1.0
+    scaleA = numeric.norm2(A, "A") if A.size else 1.0
     free = _range(A.T @ Nbp, sing_tol, scaleA) if Nbp.size else np.zeros((m, 0))
     kinds = [k for k, v in (("parallel", unres.shape[1]), ("serial", free.shape[1])) if v]
     singularity = "+".join(kinds) if kinds else "none"
@@ -352,14 +374,9 @@ def _assemble(A, B, P, names, act_names, sing_tol) -> StaticModel:
     Npl = _null(P.T, sing_tol) if P.shape[1] else np.eye(A.shape[0])
     BN = B.T @ Npl
     if BN.shape[0] == BN.shape[1] and "serial" not in kinds:
-        try:
-            G = -(A.T @ Npl) @ np.linalg.inv(BN)
-        except np.linalg.LinAlgError:
-            G = None
+        BNi = numeric.inv(BN, "B", max_cond=np.inf)
+        G = None if BNi is None else -(A.T @ Npl) @ BNi
     if G is not None and m == na and "parallel" not in kinds:
-        try:
-            J = np.linalg.inv(G.T)
-        except np.linalg.LinAlgError:
-            J = None
+        J = numeric.inv(G.T, "G", max_cond=np.inf)
     return StaticModel(A, B, P, tuple(names), tuple(act_names), G, J, unres, free, singularity,
                        cond, sing_tol)

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .._checks import show
 from ..errors import StaticsError
 from .results import CapabilityResult, WorkspaceResult
 
@@ -46,8 +47,11 @@ def plot_capability(
     """
     _check(res, CapabilityResult, path, "capability / capability_polygon")
     names = list(res.wrench_names)
-    if len(plane) != 2 or plane[0] == plane[1] or any(c not in names for c in plane):
-        raise StaticsError(f"plane: expected two different components of {names}, got {plane!r}")
+    if (isinstance(plane, (str, bytes)) or not isinstance(plane, Sequence) or len(plane) != 2
+            or not all(isinstance(c, str) and c in names for c in plane)
+            or plane[0] == plane[1]):
+        raise StaticsError(f"plane: expected two different components of {names}, got "
+                           f"{show(plane)}", path=("plane",))
     plt = _plt()
     i, j = names.index(plane[0]), names.index(plane[1])
     other = [k for k in range(len(names)) if k not in (i, j)]

@@ -5,7 +5,9 @@ Each problem takes the static model (2) of :mod:`optkin.statics.model` through
 another pose only assigns parameter values: cvxpy canonicalises a DPP problem once and then
 re-uses the reduction (its "parameterized programs"). Problems are cached by their shape
 (rows, wrench dimension, actuators, passive unknowns, number of directions / vertices),
-so two mechanisms of the same shape share them; a lock makes set-and-solve atomic.
+so two mechanisms of the same shape share them; a lock makes set-and-solve atomic, and every
+solve starts cold (no warm start), so that its answer does not depend on the history of the
+process.
 """
 
 from __future__ import annotations
@@ -257,14 +259,16 @@ def solve(p: CvxProblem, values: dict[str, np.ndarray], solver: str | None = Non
     """
     name = solver or p.solver
     with p.lock:
-        for k, v in values.items():
-            if k in p.params:
-                p.params[k].value = v
         t0 = time.perf_counter()
         raw = None
         err = ""
         try:
-            p.problem.solve(solver=name, **(solver_options or {}))
+            for k, v in values.items():
+                if k in p.params:
+                    p.params[k].value = v
+            # no warm start: the answer must not depend on what this cached problem solved
+            # before (another pose, another mechanism of the same shape)
+            p.problem.solve(solver=name, warm_start=False, **(solver_options or {}))
             raw = p.problem.status
         except (cp.error.SolverError, ValueError, ArithmeticError) as e:
             err = f"{type(e).__name__}: {e}"
