@@ -6,9 +6,27 @@ result evaluation, the path tracker of :func:`optkin.forward_batch`) are generat
 (``gcc -O1 -shared -fPIC``) and loaded back with ``casadi.external``. The library is cached
 on disk under a name that hashes the mechanism's content key, the CasADi version,
 :data:`CODE_VERSION` and the Functions' signatures, so a second process loads it in
-milliseconds. Whenever something is missing (no compiler, a read-only disk, a failed
-build) the interpreted SX Functions are used instead, silently (a ``logging`` debug line
-says why).
+milliseconds. Whenever something is missing (no compiler, no usable cache directory, a
+failed build) the interpreted SX Functions are used instead (a ``logging`` debug line says
+why).
+
+Where the cache lives, and what it trusts
+-----------------------------------------
+The cache directory is ``OPTKIN_CACHE`` when set, else ``$XDG_CACHE_HOME/optkin`` or
+``~/.cache/optkin`` (created with mode 0700). A directory is used only when it is a real
+directory (not a symbolic link), owned by the current user and not writable by group or
+others. When neither is usable, each process compiles into a fresh private directory of
+its own (``tempfile.mkdtemp``, removed at exit); a shared, predictable path is never used.
+An ``OPTKIN_CACHE`` (or an existing default directory) that cannot be used is reported once
+per process with a warning naming the reason and the fix.
+
+Beside each library ``<name>.so`` a record ``<name>.json`` holds the SHA-256 and size of the
+library, the tag (model key) and cache key it was built for, the CasADi version and
+:data:`CODE_VERSION`. Both are written atomically after the build. A library is loaded only
+when both files are regular files owned by the current user and not writable by group or
+others, the record names the requested tag and key, and the library's bytes match the
+digest; anything else (a truncated, garbled, foreign or copied library) is rebuilt, never
+loaded. (On platforms without user ids, such as Windows, only the record is checked.)
 
 Environment variables
 ---------------------
@@ -17,8 +35,7 @@ Environment variables
     (``forward_batch``, ``Model.compile()``, or a model that has served many ``forward``
     calls); ``eager``: compile when the model is built; ``off`` (or ``0``): never.
 ``OPTKIN_CACHE``
-    The cache directory (default ``$XDG_CACHE_HOME/optkin`` or ``~/.cache/optkin``; when
-    that is not writable, a directory under the system temp dir).
+    The cache directory (see above).
 ``OPTKIN_CC``
     The C compiler (default ``$CC``, else ``gcc``, else ``cc``). Set it to a name that does
     not exist to simulate a machine without a compiler.
@@ -26,15 +43,19 @@ Environment variables
 
 from __future__ import annotations
 
+import atexit
 import hashlib
+import json
 import logging
 import os
 import platform
 import shutil
+import stat
 import subprocess
 import sys
 import tempfile
 import threading
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -52,11 +73,19 @@ __all__ = [
 
 log = logging.getLogger("optkin.compiled")
 
-#: Bump when the generated Functions change meaning (part of every cache key).
-CODE_VERSION = "2"
+#: Bump when the generated Functions or the cache layout change (part of every cache key).
+CODE_VERSION = "3"
 
 _FLAGS = ("-O1", "-shared", "-fPIC")  # -O2 compiles twice as long, runs no faster
+_EXT = ".dll" if sys.platform == "win32" else ".so"
 _BUILD_LOCK = threading.Lock()
+_STATE_LOCK = threading.Lock()
+_UID = os.getuid() if hasattr(os, "getuid") else None
+# a symbolic link is never followed; a FIFO planted in place of a file does not block
+_OPEN_FLAGS = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+_RECORD_MAX = 1 << 16  # bytes; a longer record is not one of ours
+_tmp_cache: tuple[int, Path] | None = None  # (pid, dir): this process's private fallback
+_warned: set[tuple[str, str]] = set()
 
 
 def compile_mode() -> str:
@@ -86,31 +115,157 @@ def find_compiler() -> str | None:
     return None
 
 
-def _writable(d: Path) -> bool:
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return False
-    return os.access(d, os.W_OK | os.X_OK)
+# ------------------------------------------------------------------ the cache directory
+def _not_private(st: os.stat_result) -> str | None:
+    """Why a file or directory with status ``st`` could be changed by someone else, or None.
 
+    Parameters
+    ----------
+    st : os.stat_result
+        From ``os.lstat`` or ``os.fstat``.
 
-def cache_dir() -> Path | None:
-    """The first writable cache directory (see the module docstring), or None."""
-    cands: list[Path] = []
-    env = os.environ.get("OPTKIN_CACHE")
-    if env:
-        cands.append(Path(env).expanduser())
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    cands.append(Path(xdg).expanduser() / "optkin" if xdg else Path.home() / ".cache" / "optkin")
-    uid = os.getuid() if hasattr(os, "getuid") else "user"
-    cands.append(Path(tempfile.gettempdir()) / f"optkin-cache-{uid}")
-    for d in cands:
-        if _writable(d):
-            return d
+    Returns
+    -------
+    str or None
+        The reason, phrased to follow "it is", or None when only the current user can
+        change it (always None on platforms without user ids).
+    """
+    if _UID is None:
+        return None
+    if st.st_uid != _UID:
+        return f"owned by uid {st.st_uid}, not by the current user (uid {_UID})"
+    if st.st_mode & 0o022:
+        return f"writable by group or others (mode {stat.S_IMODE(st.st_mode):04o})"
     return None
 
 
+def _make_dirs(d: Path) -> None:
+    """Create ``d`` and its missing parents with mode 0700 (``mkdir -p -m 700``)."""
+    missing = []
+    p = d
+    while not os.path.lexists(p) and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    for p in reversed(missing):
+        try:
+            os.mkdir(p, 0o700)
+        except FileExistsError:  # created meanwhile by another process
+            pass
+
+
+def _unusable(d: Path) -> tuple[str, str] | None:
+    """Why ``d`` cannot be the cache directory and how to fix it, or None when it can.
+
+    Creates ``d`` (mode 0700) when it is missing. ``d`` is usable when it is a directory
+    (not a symbolic link) owned by the current user, not writable by group or others, and
+    writable and searchable by its owner.
+
+    Parameters
+    ----------
+    d : pathlib.Path
+        The candidate directory.
+
+    Returns
+    -------
+    tuple of str or None
+        (reason, fix), or None.
+    """
+    try:
+        _make_dirs(d)
+        st = os.lstat(d)
+    except OSError as exc:
+        return f"it cannot be created ({exc.strerror})", "choose a path you can create"
+    if stat.S_ISLNK(st.st_mode):
+        return "it is a symbolic link", "use the directory it points to, not the link"
+    if not stat.S_ISDIR(st.st_mode):
+        return "it is not a directory", "choose a directory"
+    why = _not_private(st)
+    if why is not None:
+        if st.st_uid != _UID:
+            return f"it is {why}", "choose a directory of your own"
+        return f"it is {why}", f"run `chmod 700 {d}`"
+    if st.st_mode & 0o300 != 0o300 or not os.access(d, os.W_OK | os.X_OK):
+        return "it is not writable", f"run `chmod 700 {d}` (or choose a writable directory)"
+    return None
+
+
+def _remove_tmp_cache(pid: int, d: Path) -> None:
+    """Remove the private fallback directory ``d`` at exit of the process that made it."""
+    if os.getpid() == pid:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def _process_tmp_cache() -> Path | None:
+    """This process's private fallback cache directory (``tempfile.mkdtemp``, mode 0700,
+    removed at exit), made on first use; None when it cannot be made."""
+    global _tmp_cache
+    with _STATE_LOCK:
+        if _tmp_cache is None or _tmp_cache[0] != os.getpid():  # a forked child makes its own
+            try:
+                d = Path(tempfile.mkdtemp(prefix="optkin-cache-"))
+            except OSError as exc:
+                log.debug("optkin: cannot make a temporary cache directory (%s)", exc)
+                return None
+            _tmp_cache = (os.getpid(), d)
+            atexit.register(_remove_tmp_cache, os.getpid(), d)
+        return _tmp_cache[1]
+
+
+def cache_dir() -> Path | None:
+    """The cache directory (see the module docstring), or None when there is none.
+
+    The first usable one of ``OPTKIN_CACHE`` and ``$XDG_CACHE_HOME/optkin`` (or
+    ``~/.cache/optkin``), else this process's private temporary directory. A candidate
+    that is rejected is reported once per process with a warning when it was chosen by the
+    user (``OPTKIN_CACHE``) or exists but is not private.
+
+    Returns
+    -------
+    pathlib.Path or None
+        A directory owned by the current user and writable by nobody else.
+    """
+    cands: list[tuple[Path, bool]] = []  # (directory, set by the user)
+    env = os.environ.get("OPTKIN_CACHE")
+    if env:
+        cands.append((Path(env).expanduser(), True))
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    if xdg and os.path.isabs(xdg):  # the XDG spec: ignore a relative path
+        cands.append((Path(xdg) / "optkin", False))
+    else:
+        try:
+            cands.append((Path.home() / ".cache" / "optkin", False))
+        except RuntimeError:  # no home directory
+            pass
+    rejected = []
+    chosen = None
+    for d, by_user in cands:
+        why = _unusable(d)
+        if why is None:
+            chosen = d
+            break
+        log.debug("optkin: cache directory %s not used: %s", d, why[0])
+        if by_user or os.path.lexists(d):
+            rejected.append((d, by_user, *why))
+    if chosen is not None:
+        instead = f"Compiled code is cached in {chosen} instead."
+    else:
+        chosen = _process_tmp_cache()
+        instead = ("Compiled code is not cached." if chosen is None else
+                   f"Compiled code is cached in {chosen} instead, for this process only.")
+    for d, by_user, reason, fix in rejected:
+        with _STATE_LOCK:
+            if (str(d), reason) in _warned:
+                continue
+            _warned.add((str(d), reason))
+        name = f"OPTKIN_CACHE={d}" if by_user else f"the cache directory {d}"
+        warnings.warn(f"optkin: {name} is not used: {reason}. To use it, {fix}. {instead}",
+                      stacklevel=2)
+    return chosen
+
+
+# ------------------------------------------------------------------ libraries and records
 def _digest(tag: str, funcs: Sequence[ca.Function]) -> str:
+    """The cache key of ``funcs`` built for ``tag`` (a SHA-256 hex digest)."""
     h = hashlib.sha256()
     h.update(
         f"{tag}|casadi {ca.__version__}|code {CODE_VERSION}|{sys.platform}|"
@@ -125,10 +280,78 @@ def _digest(tag: str, funcs: Sequence[ca.Function]) -> str:
         # the whole expression graph, so that a changed body (e.g. of a mapped tracker whose
         # outer signature is unchanged) never loads a stale library
         h.update(f.serialize().encode())
-    return h.hexdigest()[:20]
+    return h.hexdigest()
 
 
-def _load(path: Path, funcs: Sequence[ca.Function]) -> dict[str, ca.Function] | None:
+def _record_path(lib: Path) -> Path:
+    return lib.with_suffix(".json")
+
+
+def _read_private(path: Path, limit: int = -1) -> bytes:
+    """The bytes of ``path`` (at most ``limit``), which must be a regular file (not a
+    symbolic link) owned by the current user and writable by nobody else.
+
+    Raises
+    ------
+    OSError
+        It cannot be read, or it is a symbolic link.
+    ValueError
+        It is not a regular file, or it is not private.
+    """
+    fd = os.open(path, _OPEN_FLAGS)
+    with os.fdopen(fd, "rb") as f:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise ValueError(f"{path.name} is not a regular file")
+        why = _not_private(st)
+        if why is not None:
+            raise ValueError(f"{path.name} is {why}")
+        return f.read(limit)
+
+
+def _rejection(lib: Path, tag: str, key: str) -> str | None:
+    """Why the library ``lib`` must not be loaded for ``tag``, or None when its record
+    vouches for it (same tag and cache key, same size and SHA-256)."""
+    try:
+        rec = json.loads(_read_private(_record_path(lib), _RECORD_MAX))
+        data = _read_private(lib)
+    except (OSError, ValueError) as exc:  # ValueError includes json.JSONDecodeError
+        return f"no valid record or library ({exc})"
+    if not isinstance(rec, dict):
+        return "its record is not a JSON object"
+    if rec.get("tag") != tag or rec.get("key") != key:
+        return f"its record is for another model or build (tag {rec.get('tag')!r})"
+    if rec.get("size") != len(data) or rec.get("sha256") != hashlib.sha256(data).hexdigest():
+        return "its bytes differ from its record (truncated or changed)"
+    return None
+
+
+def _write_record(lib: Path, built: Path, tag: str, key: str, tmp: Path) -> None:
+    """Record the digest of the freshly built library ``built`` for ``lib`` and move both
+    into place atomically (library first: a reader of the old record sees a mismatch)."""
+    data = built.read_bytes()
+    rec = {"tag": tag, "key": key, "file": lib.name, "size": len(data),
+           "sha256": hashlib.sha256(data).hexdigest(), "casadi": ca.__version__,
+           "code_version": CODE_VERSION}
+    rec_tmp = tmp / (lib.stem + ".json")
+    fd = os.open(rec_tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w") as f:
+        json.dump(rec, f, indent=1)
+    os.chmod(built, 0o700)  # whatever the umask: the loader refuses group-writable files
+    os.replace(built, lib)  # atomic: a concurrent reader sees old or new
+    os.replace(rec_tmp, _record_path(lib))
+
+
+def _load(path: Path, tag: str, key: str,
+          funcs: Sequence[ca.Function]) -> dict[str, ca.Function] | None:
+    """The Functions of the cached library ``path`` when its record vouches for it (see
+    :func:`_rejection`) and their signatures match ``funcs``; else None."""
+    if not os.path.lexists(path):
+        return None
+    why = _rejection(path, tag, key)
+    if why is not None:
+        log.info("optkin: not loading %s: %s; rebuilding it", path, why)
+        return None
     try:
         out = {}
         for f in funcs:
@@ -139,7 +362,7 @@ def _load(path: Path, funcs: Sequence[ca.Function]) -> dict[str, ca.Function] | 
                 raise RuntimeError(f"signature mismatch for {f.name()}")
             out[f.name()] = e
         return out
-    except Exception as exc:  # a corrupt or foreign library: rebuild
+    except Exception as exc:  # a library that does not define these Functions: rebuild
         log.debug("optkin: cannot load %s (%s)", path, exc)
         return None
 
@@ -152,7 +375,8 @@ def library(
     Parameters
     ----------
     tag : str
-        What the Functions belong to, e.g. ``"core:" + mech.key``; part of the cache key.
+        What the Functions belong to, e.g. ``"core:" + mech.key``; part of the cache key
+        and recorded beside the library.
     funcs : sequence of casadi.Function
         Functions with distinct names; they are generated into one C file.
     build : bool
@@ -172,22 +396,22 @@ def libraries(
     requests: Sequence[tuple[str, Sequence[ca.Function]]], build: bool = True
 ) -> list[dict[str, ca.Function] | None]:
     """:func:`library` for several libraries; the missing ones are compiled in parallel
-    (one compiler process each; the C code is generated in this thread)."""
+    (one compiler process each; the C code is generated in this thread). A cached library
+    whose record does not vouch for it is rebuilt like a missing one."""
     out: list[dict[str, ca.Function] | None] = [None] * len(requests)
     if compile_mode() == "off" or not requests:
         return out
     d = cache_dir()
     if d is None:
-        log.debug("optkin: no writable cache directory; using interpreted Functions")
+        log.debug("optkin: no usable cache directory; using interpreted Functions")
         return out
     todo = []
     for k, (tag, funcs) in enumerate(requests):
-        name = f"optkin_{tag.split(':')[0]}_{_digest(tag, funcs)}"
-        path = d / (name + (".dll" if sys.platform == "win32" else ".so"))
-        if path.exists():
-            out[k] = _load(path, funcs)
+        key = _digest(tag, funcs)
+        path = d / f"optkin_{tag.split(':')[0]}_{key[:20]}{_EXT}"
+        out[k] = _load(path, tag, key, funcs)
         if out[k] is None:
-            todo.append((k, name, path, funcs))
+            todo.append((k, tag, key, path, funcs))
     if not todo or not build:
         return out
     cc = find_compiler()
@@ -196,13 +420,12 @@ def libraries(
         return out
     with _BUILD_LOCK, tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:
         procs = []
-        for k, name, path, funcs in todo:
-            if path.exists():  # built meanwhile by another thread
-                out[k] = _load(path, funcs)
-                if out[k] is not None:
-                    continue
+        for k, tag, key, path, funcs in todo:
+            out[k] = _load(path, tag, key, funcs)  # built meanwhile by another thread?
+            if out[k] is not None:
+                continue
             try:
-                src = Path(tmp) / (name + ".c")
+                src = Path(tmp) / (path.stem + ".c")
                 cg = ca.CodeGenerator(src.name, {"with_header": False})
                 for f in funcs:
                     cg.add(f)
@@ -210,10 +433,10 @@ def libraries(
                 so = Path(tmp) / path.name
                 p = subprocess.Popen([cc, *_FLAGS, str(src), "-o", str(so), "-lm"],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-                procs.append((k, path, funcs, so, p))
+                procs.append((k, tag, key, path, funcs, so, p))
             except (OSError, RuntimeError) as exc:
-                log.debug("optkin: generating %s failed (%s)", name, exc)
-        for k, path, funcs, so, p in procs:
+                log.debug("optkin: generating %s failed (%s)", path.stem, exc)
+        for k, tag, key, path, funcs, so, p in procs:
             try:
                 _, err = p.communicate(timeout=600)
             except subprocess.SubprocessError as exc:
@@ -224,11 +447,11 @@ def libraries(
                 log.debug("optkin: compiler failed: %s", err[-2000:])
                 continue
             try:
-                os.replace(so, path)  # atomic: a concurrent reader sees old or new
+                _write_record(path, so, tag, key, Path(tmp))
             except OSError as exc:
                 log.debug("optkin: cannot store %s (%s)", path, exc)
                 continue
-            out[k] = _load(path, funcs)
+            out[k] = _load(path, tag, key, funcs)
     return out
 
 
