@@ -3,37 +3,57 @@
 Describe a mechanism (a Khalil-Kleinfinger table or a parallel platform by its legs), and
 optkin compiles it once into CasADi Functions and solves its direct and inverse geometric
 models, returning result objects that say what happened.
+
+The public names below are imported on first use (PEP 562), so ``import optkin`` is quick
+and loads CasADi, cvxpy or matplotlib only when something needs them.
 """
 
-from . import mechanisms, plot, statics
-from .analysis import (
-    DofReport,
-    Jacobians,
-    SingularityReport,
-    classify,
-    dof,
-    jacobians,
-    plot_singularity_map,
-)
-from .analysis.aspects import Aspects, Workspace, aspects, workspace
-from .analysis.continuation import SingularCurves, singular_curves
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from .errors import MechanismError, OptkinError, ProblemFileError, SolverError, StaticsError
-from .mechanism import Leg, Mechanism
-from .model import get_model
-from .results import KinResult, SolutionSet, SolverStats
-from .solvers import forward, inverse
-from .solvers.batch import BatchResult, forward_batch
-from .solvers.enumerate import WorkingModes, assembly_modes, track, working_modes
 
 __version__ = "0.1.0"
 
+#: public name -> module that defines it (submodules map to themselves)
+_LAZY: dict[str, str] = {
+    "mechanisms": "optkin.mechanisms",
+    "plot": "optkin.plot",
+    "statics": "optkin.statics",
+    "DofReport": "optkin.analysis",
+    "Jacobians": "optkin.analysis",
+    "SingularityReport": "optkin.analysis",
+    "classify": "optkin.analysis",
+    "dof": "optkin.analysis",
+    "jacobians": "optkin.analysis",
+    "plot_singularity_map": "optkin.analysis",
+    "Aspects": "optkin.analysis.aspects",
+    "Workspace": "optkin.analysis.aspects",
+    "aspects": "optkin.analysis.aspects",
+    "workspace": "optkin.analysis.aspects",
+    "SingularCurves": "optkin.analysis.continuation",
+    "singular_curves": "optkin.analysis.continuation",
+    "Leg": "optkin.mechanism",
+    "Mechanism": "optkin.mechanism",
+    "get_model": "optkin.model",
+    "KinResult": "optkin.results",
+    "SolutionSet": "optkin.results",
+    "SolverStats": "optkin.results",
+    "forward": "optkin.solvers",
+    "inverse": "optkin.solvers",
+    "BatchResult": "optkin.solvers.batch",
+    "forward_batch": "optkin.solvers.batch",
+    "WorkingModes": "optkin.solvers.enumerate",
+    "assembly_modes": "optkin.solvers.enumerate",
+    "track": "optkin.solvers.enumerate",
+    "working_modes": "optkin.solvers.enumerate",
+}
+
 __all__ = [
     "Aspects",
-    "SingularCurves",
-    "Workspace",
-    "aspects",
-    "singular_curves",
-    "workspace",
+    "BatchResult",
     "DofReport",
     "Jacobians",
     "KinResult",
@@ -42,26 +62,70 @@ __all__ = [
     "MechanismError",
     "OptkinError",
     "ProblemFileError",
+    "SingularCurves",
     "SingularityReport",
     "SolutionSet",
     "SolverError",
     "SolverStats",
     "StaticsError",
     "WorkingModes",
+    "Workspace",
     "__version__",
+    "aspects",
     "assembly_modes",
     "classify",
     "dof",
-    "BatchResult",
     "forward",
     "forward_batch",
     "get_model",
     "inverse",
     "jacobians",
-    "plot_singularity_map",
     "mechanisms",
     "plot",
+    "plot_singularity_map",
+    "singular_curves",
     "statics",
     "track",
     "working_modes",
+    "workspace",
 ]
+
+
+_RESOLVED: set[str] = set()
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    # a name is resolved once; deleting it afterwards hides it, as with an eager import
+    if module is None or name in _RESOLVED:
+        raise AttributeError(f"module 'optkin' has no attribute {name!r}")
+    mod = importlib.import_module(module)
+    value = mod if module == f"optkin.{name}" else getattr(mod, name)
+    globals()[name] = value  # next time, a plain attribute
+    _RESOLVED.add(name)
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
+
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
+    from . import mechanisms, plot, statics
+    from .analysis import (
+        DofReport,
+        Jacobians,
+        SingularityReport,
+        classify,
+        dof,
+        jacobians,
+        plot_singularity_map,
+    )
+    from .analysis.aspects import Aspects, Workspace, aspects, workspace
+    from .analysis.continuation import SingularCurves, singular_curves
+    from .mechanism import Leg, Mechanism
+    from .model import get_model
+    from .results import KinResult, SolutionSet, SolverStats
+    from .solvers import forward, inverse
+    from .solvers.batch import BatchResult, forward_batch
+    from .solvers.enumerate import WorkingModes, assembly_modes, track, working_modes

@@ -37,6 +37,19 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _positive_seconds(text: str) -> float:
+    from optkin.problems.workers import MAX_TIME_LIMIT
+
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not 0 < v <= MAX_TIME_LIMIT:
+        raise argparse.ArgumentTypeError(
+            f"expected a number of seconds in (0, {MAX_TIME_LIMIT:g}], got {text!r}")
+    return v
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``optkin`` (subcommands run, validate, show)."""
     from optkin.problems.schema import optkin_version
@@ -57,6 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rerun problems whose results are complete and unchanged")
     r.add_argument("--scheduler", metavar="ADDRESS",
                    help="send problems to a Dask distributed scheduler (e.g. tcp://host:8786)")
+    r.add_argument("--time-limit", type=_positive_seconds, default=None, metavar="SECONDS",
+                   help="wall-time limit of each task without its own time_limit "
+                        "(default 600); a task past it is abandoned and reported as an error")
     r.add_argument("--no-pictures", action="store_true", help="do not draw PNG pictures")
     r.add_argument("--quiet", "-q", action="store_true", help="print only failures")
 
@@ -96,6 +112,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     tty = sys.stdout.isatty()
     t0 = time.perf_counter()
+    from optkin.problems.workers import DEFAULT_TIME_LIMIT
+
     report = run_paths(
         args.paths,
         out=args.out,
@@ -104,6 +122,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         pictures=not args.no_pictures,
         progress=_progress_factory(tty and not args.quiet),
+        time_limit=args.time_limit or DEFAULT_TIME_LIMIT,
     )
     for msg in report.invalid.values():
         _err(msg)
@@ -132,23 +151,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from optkin.problems.runner import find_problem_files
-    from optkin.problems.schema import load_problem
+    from optkin.problems.runner import find_problem_files, validate_paths
 
-    infos = find_problem_files(args.paths)
-    if not infos:
+    if not find_problem_files(args.paths):
         _err(f"optkin: no problem files (*.toml) under {' '.join(args.paths)}")
         return EXIT_INVALID
     bad = 0
-    for info in infos:
-        try:
-            problem = load_problem(info.path, display=info.display, check=True)
-        except ProblemFileError as e:
+    for ok, message in validate_paths(args.paths).values():
+        if ok:
+            print(message)
+        else:
             bad += 1
-            _err(str(e))
-            continue
-        print(f"{info.display}: ok ({len(problem.spec.task)} task(s), mechanism "
-              f"{getattr(problem.mechanism, 'name', '?')})")
+            _err(message)
     return EXIT_INVALID if bad else EXIT_OK
 
 
@@ -166,16 +180,16 @@ def _cmd_show(args: argparse.Namespace) -> int:
     except NotImplementedError:
         _err(f"{path.name}: drawing is not available in this version of optkin (no optkin.plot.draw)")
         return EXIT_FAILED
-    from optkin.problems.tasks import _vector
+    from optkin.problems.tasks import _guess, check_options
 
     what = None
     for i, task in enumerate(problem.spec.task):
         if task.kind not in ("forward", "inverse"):  # type: ignore[attr-defined]
             continue
         try:  # a task whose inputs the library rejects is skipped, as a failed one is
+            check_options(task)
             if task.kind == "forward":  # type: ignore[attr-defined]
-                guess = _vector(task.guess, mech.joint_names,  # type: ignore[attr-defined]
-                                getattr(mech, "home", None))
+                guess = _guess(mech, task.guess)  # type: ignore[attr-defined]
                 res = library_function("forward", "forward")(
                     mech, _as_list(task.qa, mech.active_names), guess=guess,  # type: ignore[attr-defined]
                     **dict(task.options))  # type: ignore[attr-defined]
@@ -188,7 +202,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 if len(sols):
                     what = sols[0]
                     break
-        except OptkinError as e:
+        except (OptkinError, ValueError) as e:
             _err(f"{path.name}: task[{i}] ({task.kind}) skipped: {e}")  # type: ignore[attr-defined]
     if what is None:
         home = getattr(mech, "home", None)
@@ -222,7 +236,11 @@ def _as_list(v: Any, names: Sequence[str]) -> list[float]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``optkin`` console script; returns the exit status."""
-    parser = build_parser()
+    try:
+        parser = build_parser()
+    except KeyboardInterrupt:
+        _err("optkin: interrupted")
+        return 130
     args = parser.parse_args(list(argv) if argv is not None else None)
     try:
         if args.command == "run":

@@ -17,11 +17,11 @@ import math
 import os
 import platform
 import tempfile
+import threading
 import time
 import traceback
 import uuid
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -34,14 +34,15 @@ from optkin.problems.schema import (
     Expected,
     Problem,
     input_hash,
-    load_problem,
     load_problem_bytes,
     optkin_version,
     parse_value_path,
 )
 from optkin.problems.tasks import TaskContext, jsonable, run_task
+from optkin.problems.workers import DEFAULT_TIME_LIMIT, Job, JobOutcome, run_jobs
 
 __all__ = [
+    "DEFAULT_TIME_LIMIT",
     "RESULT_FORMAT",
     "ProblemFileInfo",
     "RunReport",
@@ -51,7 +52,9 @@ __all__ = [
     "run_problem",
     "run_job",
     "run_paths",
+    "validate_paths",
     "is_complete",
+    "clean_json",
 ]
 
 #: Version of the result JSON layout.
@@ -65,15 +68,39 @@ SUMMARY_FIELDS = ["problem", "task", "kind", "name", "status", "passed", "time",
 # ---------------------------------------------------------------------------
 
 
+#: Prefix of every temporary file the runner makes (the stale-temp cleaner removes only these).
+TEMP_PREFIX = ".optkin-tmp."
+#: A temporary file of another host (or of a process that cannot be checked) counts as
+#: stale after this many seconds.
+STALE_AFTER = 24 * 3600.0
+
+_UMASK: list[int] = []
+
+
+def _umask() -> int:
+    if not _UMASK:
+        old = os.umask(0o022)
+        os.umask(old)
+        _UMASK.append(old)
+    return _UMASK[0]
+
+
 def atomic_write(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (temp file in the same dir + os.replace)."""
+    """Write ``data`` to ``path`` atomically (temp file in the same dir + os.replace).
+
+    The file gets the permissions of a newly created file (0666 minus the umask), and the
+    temporary file's name starts with :data:`TEMP_PREFIX` and names this host and process.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    tag = f"{TEMP_PREFIX}{platform.node() or 'host'}.{os.getpid()}."
+    fd, tmp = tempfile.mkstemp(prefix=tag, suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()
+            if hasattr(os, "fchmod"):
+                os.fchmod(f.fileno(), 0o666 & ~_umask())
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
@@ -82,34 +109,71 @@ def atomic_write(path: Path, data: bytes) -> None:
         raise
 
 
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    return True
+
+
 def _clean_stale_temps(out: Path) -> None:
-    """Remove temp files left by an interrupted run (``.<name>.<random>.tmp``)."""
+    """Remove temp files left by an interrupted run: only files this program made
+    (:data:`TEMP_PREFIX`), and only when their process is gone (same host) or they are
+    older than :data:`STALE_AFTER`."""
     if not out.is_dir():
         return
-    for p in out.rglob(".*.tmp"):
-        with contextlib.suppress(OSError):
-            p.unlink()
+    host = platform.node() or "host"
+    now = time.time()
+    for p in out.rglob(TEMP_PREFIX + "*.tmp"):
+        rest = p.name[len(TEMP_PREFIX):].split(".")
+        try:
+            pid = int(rest[-3]) if len(rest) >= 3 else None
+            owner = ".".join(rest[:-3])
+            age = now - p.lstat().st_mtime
+        except (ValueError, OSError):
+            continue
+        stale = age > STALE_AFTER or (owner == host and pid is not None and not _pid_alive(pid))
+        if stale and p.is_file() and not p.is_symlink():
+            with contextlib.suppress(OSError):
+                p.unlink()
 
 
 @dataclass(frozen=True)
 class ProblemFileInfo:
-    """A problem file found under a run path and where its results go."""
+    """A problem file found under a run path and where its results go.
+
+    ``rel`` is the file's path relative to the run path with only the final ``.toml``
+    removed, so ``a.toml`` and ``a.v2.toml`` write ``a.json`` and ``a.v2.json``.
+    """
 
     path: Path
     display: str  # the name errors and the summary use (relative to the run path)
-    rel: Path  # result path relative to OUT, without suffix
+    rel: str  # result path relative to OUT, without suffix (posix separators)
 
     def result_path(self, out: Path) -> Path:
-        return out / self.rel.with_suffix(".json")
+        return out / (self.rel + ".json")
+
+    @property
+    def stem(self) -> str:
+        """The file name without ``.toml`` (pictures are named after it)."""
+        return self.rel.rsplit("/", 1)[-1]
+
+
+def _strip_toml(name: str) -> str:
+    return name[:-5] if name.lower().endswith(".toml") else name
 
 
 def find_problem_files(paths: Sequence[str | os.PathLike]) -> list[ProblemFileInfo]:
-    """Every ``*.toml`` under ``paths`` (recursively, sorted, README skipped).
+    """Every ``*.toml`` under ``paths`` (recursively, sorted, README and hidden skipped).
 
     Raises
     ------
     ProblemFileError
-        When a path does not exist or names a non-TOML file.
+        When a path does not exist, or when two files would write the same result file
+        (before any work is done).
     """
     found: list[ProblemFileInfo] = []
     seen: set[Path] = set()
@@ -122,25 +186,26 @@ def find_problem_files(paths: Sequence[str | os.PathLike]) -> list[ProblemFileIn
                 and not any(part.startswith(".") for part in f.relative_to(p).parts)
             )
             for f in files:
-                rel = f.relative_to(p)
-                found.append(ProblemFileInfo(f, rel.as_posix(), rel.with_suffix("")))
+                rel = f.relative_to(p).as_posix()
+                found.append(ProblemFileInfo(f, rel, _strip_toml(rel)))
         elif p.is_file():
-            found.append(ProblemFileInfo(p, p.name, Path(p.stem)))
+            found.append(ProblemFileInfo(p, p.name, _strip_toml(p.name)))
         else:
             raise ProblemFileError(f"{raw}: (file): no such file or directory")
     unique: list[ProblemFileInfo] = []
-    used: dict[Path, str] = {}
+    used: dict[str, str] = {}
     for info in found:
         key = info.path.resolve()
         if key in seen:
             continue
         seen.add(key)
-        if info.rel in used:
+        slot = info.rel.casefold()  # a.json and A.json are one file on some file systems
+        if slot in used:
+            other = used[slot]
             raise ProblemFileError(
-                f"{info.path}: (file): its results would overwrite those of {used[info.rel]}; "
-                "run the two in separate --out directories"
-            )
-        used[info.rel] = str(info.path)
+                f"{info.path}: (file): its results ({info.rel}.json) would collide with those "
+                f"of {other}; rename one of them or run them with separate --out directories")
+        used[slot] = str(info.path)
         unique.append(info)
     return unique
 
@@ -306,65 +371,137 @@ def _model_warmup(mech: Any) -> tuple[float, str | None]:
     return time.perf_counter() - t0, None
 
 
-def run_problem(problem: Problem, picture_dir: Path | None = None,
-                stem: str | None = None) -> dict[str, Any]:
+def clean_json(v: Any) -> Any:
+    """``v`` as strict JSON data: NaN and inf become None, anything else unknown its repr."""
+    v = jsonable(v)
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {str(k): clean_json(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return [clean_json(x) for x in v]
+    return v
+
+
+def _output_success(output: dict[str, Any]) -> bool:
+    """False when the output (or its ``info``) says the analysis did not succeed."""
+    if output.get("success") is False:
+        return False
+    info = output.get("info")
+    return not (isinstance(info, dict) and info.get("success") is False)
+
+
+def _task_limit(task: Any, default: float | None) -> float | None:
+    limit = getattr(task, "time_limit", None)
+    return float(limit) if limit is not None else default
+
+
+def _abandoned_record(i: int, task: Any, why: str, elapsed: float | None) -> dict[str, Any]:
+    return {
+        "index": i, "kind": task.kind, "name": task.name, "status": "error", "passed": False,
+        "message": why, "time": elapsed,
+        "params": clean_json(task.model_dump(exclude={"expected"}, exclude_none=True)),
+        "expected": check_expected(task.expected, None, "error"), "output": None,
+        "pictures": [], "notes": [], "abandoned": True,
+    }
+
+
+def run_task_record(mech: Any, task: Any, i: int, ctx: TaskContext) -> dict[str, Any]:
+    """Run task ``i`` and return its JSON-ready record (never raises for the task's sake)."""
+    t0 = time.perf_counter()
+    output: dict[str, Any] | None = None
+    message = ""
+    try:
+        output = run_task(mech, task, ctx)
+        status = "ok" if _output_success(output) else "failed"
+        if status == "failed":
+            message = str(output.get("message") or (output.get("info") or {}).get("message")
+                          or "the analysis did not succeed")
+    except NotImplementedError as e:
+        status, message = "unavailable", str(e)
+    except (MechanismError, ValueError) as e:
+        status, message = "error", f"{type(e).__name__}: {e}"
+    except Exception as e:  # noqa: BLE001 - one task never stops the others
+        status = "error"
+        message = f"{type(e).__name__}: {e}"
+        ctx.notes.append("".join(traceback.format_exception(e)[-3:]).strip())
+    elapsed = time.perf_counter() - t0
+    pictures = []
+    if output is not None:
+        pictures = [Path(p).name for p in output.pop("pictures", []) or []]
+    try:
+        output = clean_json(output)
+        json.dumps(output, allow_nan=False)
+    except (TypeError, ValueError, RecursionError) as e:
+        status, message, output = "error", f"the task's output cannot be stored: {e}", None
+    exp = check_expected(task.expected, output, status)
+    if status == "ok" and not exp["passed"]:
+        failed = [c for c in exp["checks"] if not c["ok"]]
+        message = "; ".join(
+            f"expected {c['check']} = {_fmt(c['want'])}, got {c['got']}" for c in failed
+        )
+    return clean_json({
+        "index": i,
+        "kind": task.kind,  # type: ignore[attr-defined]
+        "name": task.name,
+        "status": status,
+        "passed": exp["passed"],
+        "message": message,
+        "time": elapsed,
+        "params": task.model_dump(exclude={"expected"}, exclude_none=True),
+        "expected": exp,
+        "output": output,
+        "pictures": pictures,
+        "notes": ctx.notes,
+    })
+
+
+def run_problem(
+    problem: Problem,
+    picture_dir: Path | None = None,
+    stem: str | None = None,
+    *,
+    done_tasks: dict[int, dict[str, Any]] | None = None,
+    time_limit: float | None = None,
+    on_task_start: Callable[[int, float | None], None] | None = None,
+    on_task_done: Callable[[int, dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
     """Run every task of a validated problem; never raises for a failing task.
 
     The mechanism is built once (by validation) and its compiled model fetched once;
-    every task reuses them.
+    every task reuses them. ``done_tasks`` holds records of tasks already run (by a
+    worker that died since; ``{"abandoned": True, "message": why}`` for the task it was
+    running): they are not run again. ``on_task_start(i, limit)`` and
+    ``on_task_done(i, record)`` report progress (the worker protocol); the time limit of
+    a task (its ``time_limit``, else ``time_limit``) is enforced by the worker's parent,
+    not here. The result is ``complete`` when no task was abandoned.
     """
     t_start = time.perf_counter()
     started = _now()
     mech = problem.mechanism
-    build_time, note = _model_warmup(mech)
+    done_tasks = dict(done_tasks or {})
+    build_time, note = (0.0, None)
+    if len(done_tasks) < len(problem.spec.task):
+        build_time, note = _model_warmup(mech)
     stem = stem or Path(problem.display).stem
     tasks_out: list[dict[str, Any]] = []
     for i, task in enumerate(problem.spec.task):
-        ctx = TaskContext(problem.display, i, picture_dir, stem)
-        t0 = time.perf_counter()
-        output: dict[str, Any] | None = None
-        message = ""
-        try:
-            output = run_task(mech, task, ctx)
-            status = "ok" if output.get("success", True) is not False else "failed"
-            if status == "failed":
-                message = str(output.get("message") or "the analysis did not succeed")
-        except NotImplementedError as e:
-            status, message = "unavailable", str(e)
-        except (MechanismError, ValueError) as e:
-            status, message = "error", f"{type(e).__name__}: {e}"
-        except Exception as e:  # noqa: BLE001 - one task never stops the others
-            status = "error"
-            message = f"{type(e).__name__}: {e}"
-            ctx.notes.append("".join(traceback.format_exception(e)[-3:]).strip())
-        elapsed = time.perf_counter() - t0
-        pictures = []
-        if output is not None:
-            pictures = [Path(p).name for p in output.pop("pictures", []) or []]
-        exp = check_expected(task.expected, output, status)
-        if status == "ok" and not exp["passed"]:
-            failed = [c for c in exp["checks"] if not c["ok"]]
-            message = "; ".join(
-                f"expected {c['check']} = {_fmt(c['want'])}, got {c['got']}" for c in failed
-            )
-        tasks_out.append({
-            "index": i,
-            "kind": task.kind,  # type: ignore[attr-defined]
-            "name": task.name,
-            "status": status,
-            "passed": exp["passed"],
-            "message": message,
-            "time": elapsed,
-            "params": jsonable(task.model_dump(exclude={"expected"}, exclude_none=True)),
-            "expected": exp,
-            "output": output,
-            "pictures": pictures,
-            "notes": ctx.notes,
-        })
+        prior = done_tasks.get(i)
+        if prior is not None:
+            rec = (_abandoned_record(i, task, str(prior.get("message", "")), prior.get("time"))
+                   if prior.get("abandoned") else prior)
+            tasks_out.append(rec)
+            continue
+        if on_task_start is not None:
+            on_task_start(i, _task_limit(task, time_limit))
+        rec = run_task_record(mech, task, i, TaskContext(problem.display, i, picture_dir, stem))
+        if on_task_done is not None:
+            on_task_done(i, rec)
+        tasks_out.append(rec)
     mech_echo = mech.to_dict() if hasattr(mech, "to_dict") else None
-    return {
+    return clean_json({
         "result_format": RESULT_FORMAT,
-        "complete": True,
+        "complete": not any(t.get("abandoned") for t in tasks_out),
         "problem": problem.display,
         "run_id": uuid.uuid4().hex,
         "file": str(problem.path),
@@ -376,35 +513,86 @@ def run_problem(problem: Problem, picture_dir: Path | None = None,
         "elapsed": time.perf_counter() - t_start,
         "model_build_time": build_time,
         "model_note": note,
-        "input": jsonable(problem.document),
-        "mechanism": jsonable(mech_echo),
+        "input": problem.document,
+        "mechanism": mech_echo,
         "mechanism_key": getattr(mech, "key", None),
         "tasks": tasks_out,
         "passed": all(t["passed"] for t in tasks_out),
-    }
+    })
+
+
+def _load_any(data: bytes, display: str, source: str) -> Problem:
+    """:func:`load_problem_bytes`, with every failure turned into the file's error."""
+    try:
+        return load_problem_bytes(data, display, path=source, check=True)
+    except ProblemFileError:
+        raise
+    except (Exception, RecursionError, MemoryError) as e:  # noqa: BLE001
+        raise ProblemFileError(f"{display}: (file): cannot be read: {type(e).__name__}: "
+                               f"{str(e)[:200]}") from None
+
+
+def worker_job(jid: str, spec: dict[str, Any], send: Callable[[Any], None]) -> tuple:
+    """Run (or validate) one problem inside a worker process; the final message.
+
+    ``spec`` holds ``display``, ``data`` (the file's bytes), ``source``, ``pictures``,
+    ``validate``, ``time_limit`` and ``done_tasks``. Progress goes through ``send`` as
+    ``("task", jid, i, limit)`` and ``("task_done", jid, i, record, pictures)``.
+    """
+    display = spec["display"]
+    try:
+        problem = _load_any(spec["data"], display, spec["source"])
+        if spec.get("validate"):
+            from optkin.problems.tasks import check_task
+
+            for i, task in enumerate(problem.spec.task):
+                check_task(problem.mechanism, task, i, display)
+            return ("done", jid, {"tasks": len(problem.spec.task),
+                                  "mechanism": getattr(problem.mechanism, "name", "?")})
+    except ProblemFileError as e:
+        return ("invalid", jid, str(e))
+    except MemoryError:
+        return ("invalid", jid, f"{display}: (file): too large to load in memory")
+    pictures = bool(spec.get("pictures", True))
+    stem = Path(display).name
+    stem = stem[:-5] if stem.lower().endswith(".toml") else stem
+    with contextlib.ExitStack() as stack:
+        tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="optkin-pics-"))) \
+            if pictures else None
+
+        def task_done(i: int, rec: dict[str, Any]) -> None:
+            pngs = {}
+            for name in rec.get("pictures", []):
+                f = tmp / name if tmp is not None else None
+                if f is not None and f.exists():
+                    pngs[name] = f.read_bytes()
+            send(("task_done", jid, i, rec, pngs))
+
+        result = run_problem(
+            problem, tmp, stem=stem, done_tasks=spec.get("done_tasks"),
+            time_limit=spec.get("time_limit"),
+            on_task_start=lambda i, limit: send(("task", jid, i, limit)),
+            on_task_done=task_done)
+    return ("done", jid, result)
 
 
 def run_job(display: str, data: bytes, source: str, pictures: bool = True) -> dict[str, Any]:
-    """Worker entry point: run one problem given as bytes.
+    """Run one problem given as bytes in this process (no time limits).
 
-    Returns ``{"result": dict, "pictures": {filename: png bytes}}``; the caller writes
-    them (so workers need no shared file system). Pictures are drawn in a private
-    temporary directory.
+    Returns ``{"result": dict, "pictures": {filename: png bytes}}``.
     """
-    problem = load_problem_bytes(data, display, path=source, check=True)
-    stem = Path(display).with_suffix("").as_posix().replace("/", "__")
-    pngs: dict[str, bytes] = {}
-    if pictures:
-        with tempfile.TemporaryDirectory(prefix="optkin-pics-") as tmp:
-            result = run_problem(problem, Path(tmp), stem=Path(display).stem)
-            for t in result["tasks"]:
-                for name in t["pictures"]:
-                    f = Path(tmp) / name
-                    if f.exists():
-                        pngs[name] = f.read_bytes()
-    else:
-        result = run_problem(problem, None, stem=stem)
-    return {"result": result, "pictures": pngs}
+    out: dict[str, Any] = {"pictures": {}}
+
+    def collect(msg: tuple) -> None:
+        if msg[0] == "task_done":
+            out["pictures"].update(msg[4])
+
+    spec = {"display": display, "data": data, "source": source, "pictures": pictures}
+    final = worker_job(display, spec, collect)
+    if final[0] != "done":
+        raise ProblemFileError(final[2])
+    out["result"] = final[2]
+    return out
 
 
 # ---------------------------------------------------------------------------
@@ -439,12 +627,23 @@ class RunReport:
         return 0
 
 
-def _write_result(out: Path, info: ProblemFileInfo, job: dict[str, Any]) -> None:
-    rel_dir = (out / info.rel).parent
-    for name, data in job.get("pictures", {}).items():
-        atomic_write(rel_dir / name, data)
-    blob = json.dumps(job["result"], indent=1, sort_keys=False, allow_nan=False)
+def _write_result(out: Path, info: ProblemFileInfo, result: dict[str, Any],
+                  pictures: dict[str, bytes]) -> None:
+    rel_dir = info.result_path(out).parent
+    for name, data in pictures.items():
+        atomic_write(rel_dir / Path(name).name, data)
+    blob = json.dumps(clean_json(result), indent=1, sort_keys=False, allow_nan=False)
     atomic_write(info.result_path(out), blob.encode("utf-8"))
+
+
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def _cell(v: Any) -> Any:
+    """A summary cell a spreadsheet will not run as a formula (leading ``'``)."""
+    if isinstance(v, str) and v.startswith(_FORMULA_START):
+        return "'" + v
+    return v
 
 
 def _summary_rows(report: RunReport, order: Sequence[ProblemFileInfo]) -> list[dict[str, Any]]:
@@ -462,10 +661,11 @@ def _summary_rows(report: RunReport, order: Sequence[ProblemFileInfo]) -> list[d
                 rows.append({
                     "problem": name, "task": t.get("index"), "kind": t.get("kind"),
                     "name": t.get("name") or "", "status": t.get("status"),
-                    "passed": bool(t.get("passed")), "time": f"{float(t.get('time') or 0):.4f}",
+                    "passed": bool(t.get("passed")),
+                    "time": f"{float(t.get('time') or 0):.4f}",
                     "message": (t.get("message") or "").replace("\n", " ")[:500],
                 })
-    return rows
+    return [{k: _cell(v) for k, v in r.items()} for r in rows]
 
 
 def _write_summary(out: Path, rows: Iterable[dict[str, Any]]) -> Path:
@@ -479,17 +679,24 @@ def _write_summary(out: Path, rows: Iterable[dict[str, Any]]) -> Path:
     return path
 
 
-def _dask_client(address: str) -> Any:
+#: Largest problem file read (bytes); larger files are invalid without being parsed.
+MAX_FILE_BYTES = 4 << 20
+
+
+def _read_problem_file(info: ProblemFileInfo) -> bytes:
     try:
-        from distributed import Client
-    except ImportError:
-        raise ProblemFileError(
-            "--scheduler: dask.distributed is not installed; pip install 'optkin[dask]'"
-        ) from None
-    try:
-        return Client(address, timeout="10s")
-    except (OSError, TimeoutError, ValueError) as e:
-        raise ProblemFileError(f"--scheduler: cannot connect to {address!r}: {e}") from None
+        size = info.path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ProblemFileError(
+                f"{info.display}: (file): {size} bytes is larger than the {MAX_FILE_BYTES} "
+                "bytes a problem file may have; split it into several files")
+        with info.path.open("rb") as f:
+            data = f.read(MAX_FILE_BYTES + 1)
+    except OSError as e:
+        raise ProblemFileError(f"{info.display}: (file): cannot read: {e.strerror or e}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise ProblemFileError(f"{info.display}: (file): larger than {MAX_FILE_BYTES} bytes")
+    return data
 
 
 def run_paths(
@@ -501,13 +708,17 @@ def run_paths(
     pictures: bool = True,
     progress: Callable[[int], Any] | None = None,
     on_result: Callable[[str, dict[str, Any]], None] | None = None,
+    time_limit: float = DEFAULT_TIME_LIMIT,
 ) -> RunReport:
     """Run every problem file under ``paths``, writing results into ``out``.
 
+    Every problem runs in a worker process (``jobs`` of them; with ``scheduler``, a Dask
+    scheduler address, in a worker process on a Dask worker), so that a task past its
+    time limit (its ``time_limit`` key, else ``time_limit`` seconds) or a worker that
+    dies fails only that task: the problem's other tasks and the other problems go on.
     Problems whose complete result exists with the same input hash are skipped unless
-    ``force``. ``jobs`` > 1 runs problems in a process pool; ``scheduler`` (a Dask
-    scheduler address) sends them to a Dask cluster instead. ``progress(total)`` returns
-    a progress object with ``update()``/``close()`` (e.g. a tqdm bar).
+    ``force``. ``progress(total)`` returns a progress object with ``update()``/``close()``
+    (e.g. a tqdm bar).
     """
     out = Path(out)
     report = RunReport()
@@ -517,97 +728,155 @@ def run_paths(
     todo: list[tuple[ProblemFileInfo, bytes]] = []
     for info in infos:
         try:
-            problem = load_problem(info.path, display=info.display, check=True)
+            data = _read_problem_file(info)
         except ProblemFileError as e:
             report.invalid[info.display] = str(e)
             continue
-        prev = None if force else is_complete(info.result_path(out), problem.hash)
+        prev = None if force else is_complete(info.result_path(out), input_hash(data))
         if prev is not None:
             report.skipped.append(info.display)
             report.results[info.display] = prev
         else:
-            todo.append((info, problem.data))
+            todo.append((info, data))
     bar = progress(len(todo)) if (progress and todo) else None
+    by_key = {info.display: info for info, _ in todo}
 
-    def done(info: ProblemFileInfo, job: dict[str, Any] | None, err: str | None) -> None:
-        if job is not None:
+    def done(o: JobOutcome) -> None:
+        info = by_key[o.key]
+        if o.kind == "done" and o.result is not None:
             try:
-                _write_result(out, info, job)
-                report.results[info.display] = job["result"]
+                _write_result(out, info, o.result, o.pictures)
+                report.results[info.display] = o.result
                 report.ran.append(info.display)
             except (OSError, TypeError, ValueError) as e:
-                err = f"cannot write results: {e}"
-        if err is not None:
-            report.crashed[info.display] = err
+                report.crashed[info.display] = f"cannot write results: {e}"
+        elif o.kind == "invalid":
+            report.invalid[info.display] = o.message
+        else:
+            report.crashed[info.display] = o.message
         if on_result is not None:
-            on_result(info.display, report.results.get(info.display, {"error": err}))
+            on_result(info.display, report.results.get(info.display, {"error": o.message}))
         if bar is not None:
             bar.update(1)
 
     try:
+        specs = [Job(info.display, {"display": info.display, "data": data,
+                                    "source": str(info.path), "pictures": pictures})
+                 for info, data in todo]
         if scheduler:
-            _run_dask(scheduler, todo, pictures, done)
-        elif jobs > 1 and len(todo) > 1:
-            _run_pool(min(jobs, len(todo)), todo, pictures, done)
+            _run_dask(scheduler, specs, time_limit, done)
         else:
-            for info, data in todo:
-                try:
-                    job = run_job(info.display, data, str(info.path), pictures)
-                    done(info, job, None)
-                except Exception as e:  # noqa: BLE001 - one problem never stops the others
-                    done(info, None, f"{type(e).__name__}: {e}")
+            run_jobs(specs, n_workers=jobs, time_limit=time_limit, on_outcome=done,
+                     threads=1 if jobs > 1 else None)
     finally:
         if bar is not None:
             bar.close()
-    report.summary_path = _write_summary(out, _summary_rows(report, infos))
+        report.summary_path = _write_summary(out, _summary_rows(report, infos))
     return report
 
 
-def _run_pool(jobs: int, todo: list[tuple[ProblemFileInfo, bytes]], pictures: bool,
-              done: Callable[[ProblemFileInfo, dict[str, Any] | None, str | None], None]) -> None:
-    import multiprocessing as mp
+def validate_paths(paths: Sequence[str | os.PathLike],
+                   time_limit: float = DEFAULT_TIME_LIMIT) -> dict[str, tuple[bool, str]]:
+    """Validate every problem file under ``paths`` with every check :func:`run_paths`
+    makes before solving (in a worker process, under ``time_limit``).
 
-    method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-    ctx = mp.get_context(method)
-    if method == "forkserver":  # workers fork from a server that has optkin imported
-        ctx.set_forkserver_preload(["optkin.problems.runner"])
-    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx)
+    Returns ``{display: (ok, message)}`` in file order.
+    """
+    infos = find_problem_files(paths)
+    out: dict[str, tuple[bool, str]] = {}
+    jobs = []
+    for info in infos:
+        try:
+            data = _read_problem_file(info)
+        except ProblemFileError as e:
+            out[info.display] = (False, str(e))
+            continue
+        out[info.display] = (False, "")
+        jobs.append(Job(info.display, {"display": info.display, "data": data,
+                                       "source": str(info.path), "validate": True}))
+    for o in run_jobs(jobs, n_workers=1, time_limit=time_limit):
+        if o.kind == "done" and o.result is not None:
+            out[o.key] = (True, f"{o.key}: ok ({o.result['tasks']} task(s), mechanism "
+                                f"{o.result['mechanism']})")
+        elif o.kind == "invalid":
+            out[o.key] = (False, o.message)
+        else:
+            out[o.key] = (False, f"{o.key}: (file): {o.message}")
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Dask
+# ---------------------------------------------------------------------------
+
+#: Seconds allowed to reach a Dask scheduler and exchange the first messages.
+DASK_CONNECT_TIMEOUT = 10.0
+
+
+def _dask_client(address: str) -> Any:
+    """A Dask client of ``address``, or a ProblemFileError within the connect timeout.
+
+    The connection is made in a helper thread so that a service that is not a Dask
+    scheduler (one that sends a banner, or keeps the connection open without answering)
+    can neither hang the run nor escape as a raw exception.
+    """
     try:
-        futures: dict[Future, ProblemFileInfo] = {
-            pool.submit(run_job, info.display, data, str(info.path), pictures): info
-            for info, data in todo
-        }
-        pending = set(futures)
-        while pending:
-            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for f in finished:
-                info = futures[f]
-                try:
-                    done(info, f.result(), None)
-                except Exception as e:  # noqa: BLE001 - includes a crashed worker
-                    done(info, None, f"{type(e).__name__}: {e}")
-    except BaseException:  # Ctrl-C: drop queued problems, keep what is written
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    pool.shutdown(wait=True)
+        from distributed import Client
+    except ImportError:
+        raise ProblemFileError(
+            "--scheduler: dask.distributed is not installed; pip install 'optkin[dask]'"
+        ) from None
+    box: dict[str, Any] = {}
+
+    def connect() -> None:
+        try:
+            box["client"] = Client(address, timeout=f"{DASK_CONNECT_TIMEOUT:g}s")
+        except BaseException as e:  # noqa: BLE001 - reported below, whatever it is
+            box["error"] = e
+
+    t = threading.Thread(target=connect, daemon=True, name="optkin-dask-connect")
+    t.start()
+    t.join(DASK_CONNECT_TIMEOUT + 5.0)
+    if "client" in box:
+        return box["client"]
+    if t.is_alive():
+        why = f"no Dask scheduler answered within {DASK_CONNECT_TIMEOUT + 5.0:g} s"
+    else:
+        e = box.get("error")
+        why = f"{type(e).__name__}: {str(e)[:200]}" if not isinstance(e, MemoryError) else \
+            "the service there does not speak the Dask protocol"
+    raise ProblemFileError(f"--scheduler: cannot connect to {address!r}: {why}; give the "
+                           "address of a Dask scheduler (e.g. tcp://host:8786)")
 
 
-def _run_dask(address: str, todo: list[tuple[ProblemFileInfo, bytes]], pictures: bool,
-              done: Callable[[ProblemFileInfo, dict[str, Any] | None, str | None], None]) -> None:
+def _isolated_job(spec: dict[str, Any], time_limit: float) -> dict[str, Any]:
+    """Dask task: run one problem in a worker process of this Dask worker."""
+    box: dict[str, Any] = {}
+    job = Job(spec["display"], spec)
+    run_jobs([job], n_workers=1, time_limit=time_limit,
+             on_outcome=lambda o: box.update(outcome=o))
+    o = box["outcome"]
+    return {"kind": o.kind, "result": o.result, "pictures": o.pictures, "message": o.message}
+
+
+def _run_dask(address: str, jobs: list[Job], time_limit: float,
+              done: Callable[[JobOutcome], None]) -> None:
     client = _dask_client(address)
     try:
         from distributed import as_completed
 
         futures = {
-            client.submit(run_job, info.display, data, str(info.path), pictures,
-                          key=f"optkin-{input_hash(data)[:12]}-{i}", pure=False): info
-            for i, (info, data) in enumerate(todo)
+            client.submit(_isolated_job, job.spec, time_limit,
+                          key=f"optkin-{input_hash(job.spec['data'])[:12]}-{i}",
+                          pure=False): job
+            for i, job in enumerate(jobs)
         }
         for f in as_completed(list(futures)):
-            info = futures[f]
+            job = futures[f]
             try:
-                done(info, f.result(), None)
-            except Exception as e:  # noqa: BLE001
-                done(info, None, f"{type(e).__name__}: {e}")
+                r = f.result()
+                done(JobOutcome(job.key, r["kind"], r["result"], r["pictures"], r["message"]))
+            except Exception as e:  # noqa: BLE001 - a lost Dask worker, a cancelled task
+                done(JobOutcome(job.key, "error", message=f"{type(e).__name__}: {e}"))
     finally:
         client.close()

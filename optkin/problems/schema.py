@@ -40,7 +40,9 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from optkin._checks import MAX_ABS
 from optkin.errors import MechanismError, ProblemFileError
+from optkin.problems.workers import MAX_TIME_LIMIT
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -105,8 +107,12 @@ def _is_number(v: Any) -> bool:
 def _number(v: Any) -> float:
     if not _is_number(v):
         raise _err("number", "expected a number", v)
+    if isinstance(v, int) and abs(v) > MAX_ABS:
+        raise _err("finite", f"expected a number of magnitude at most {MAX_ABS:g}", v)
     if not math.isfinite(v):
         raise _err("finite", "expected a finite number", v)
+    if abs(v) > MAX_ABS:
+        raise _err("finite", f"expected a number of magnitude at most {MAX_ABS:g}", v)
     return float(v)
 
 
@@ -258,10 +264,33 @@ def _vector_or_named(v: Any) -> list[float] | dict[str, float]:
 JointVector = Annotated[Union[list[float], dict[str, float]], PlainValidator(_vector_or_named)]  # noqa: UP007
 
 
+def _rigid(T: list[list[float]]) -> list[list[float]]:
+    """A 4x4 matrix that is a rigid transform: rotation block orthonormal with det +1 (to
+    1e-6) and last row (0, 0, 0, 1)."""
+    R = [row[:3] for row in T[:3]]
+    for i in range(3):
+        for j in range(3):
+            dot = sum(R[k][i] * R[k][j] for k in range(3))
+            if abs(dot - (1.0 if i == j else 0.0)) > 1e-6:
+                raise PydanticCustomError(
+                    "rigid", "expected a rigid transform: the rotation block (first 3 rows and "
+                    "columns) must be orthonormal, its columns {i} and {j} are not", {"i": i, "j": j})
+    det = (R[0][0] * (R[1][1] * R[2][2] - R[1][2] * R[2][1])
+           - R[0][1] * (R[1][0] * R[2][2] - R[1][2] * R[2][0])
+           + R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0]))
+    if det < 0:
+        raise PydanticCustomError("rigid", "expected a rigid transform: the rotation block is a "
+                                  "reflection (determinant -1)")
+    if any(abs(a - b) > 1e-12 for a, b in zip(T[3], (0.0, 0.0, 0.0, 1.0))):
+        raise PydanticCustomError("rigid", "expected a rigid transform: the last row must be "
+                                  "[0, 0, 0, 1]")
+    return T
+
+
 def _pose(v: Any) -> list[float] | list[list[float]]:
-    """A task vector (2, 3 or 6 numbers) or a 4x4 homogeneous matrix."""
+    """A task vector (2, 3 or 6 numbers) or a 4x4 homogeneous matrix of a rigid motion."""
     if isinstance(v, list) and v and all(isinstance(r, list) for r in v):
-        return _list_of(_point(4), "rows of 4 numbers", n=4)(v)
+        return _rigid(_list_of(_point(4), "rows of 4 numbers", n=4)(v))
     if isinstance(v, list):
         return _list_of(_number, "numbers", min_n=1)(v)
     raise _err("pose", "expected a task vector (list of numbers) or a 4x4 matrix", v)
@@ -605,12 +634,21 @@ def _scalar_option(v: Any) -> Any:
     raise _err("option", "expected a number, string or boolean", v)
 
 
+def _time_limit(v: Any) -> float:
+    x = _positive(v)
+    if x > MAX_TIME_LIMIT:
+        raise _err("time_limit", f"expected at most {MAX_TIME_LIMIT:g} seconds", v)
+    return x
+
+
 class TaskBase(Strict):
-    """Keys shared by every task: a label, solver options and the expected block."""
+    """Keys shared by every task: a label, solver options, the expected block and the
+    task's wall-time limit in seconds (default: the run's ``--time-limit``, 600 s)."""
 
     name: Str | None = None
     options: dict[str, Scalar] = Field(default_factory=dict)
     expected: Expected | None = None
+    time_limit: Annotated[float, PlainValidator(_time_limit)] | None = None
 
 
 class ForwardTask(TaskBase):
@@ -671,9 +709,18 @@ class ClassifyTask(TaskBase):
     qa: JointVector | None = None
 
 
-_Ranges = Annotated[list[list[float]], PlainValidator(_list_of(_point(2), "ranges [low, high]"))]
+def _range(v: Any) -> list[float]:
+    """A range [low, high] with low < high."""
+    lo, hi = _point(2)(v)
+    if not lo < hi:
+        raise PydanticCustomError("range", "expected a range [low, high] with low < high, got "
+                                  "[{lo}, {hi}]", {"lo": f"{lo:g}", "hi": f"{hi:g}"})
+    return [lo, hi]
+
+
+_Ranges = Annotated[list[list[float]], PlainValidator(_list_of(_range, "ranges [low, high]"))]
 _Section = dict[str, Number]
-_Limits = dict[str, Annotated[list[float], PlainValidator(_point(2))]]
+_Limits = dict[str, Annotated[list[float], PlainValidator(_range)]]
 
 
 class SingularCurvesTask(TaskBase):
@@ -725,7 +772,7 @@ def _statics_limits(v: Any) -> float | list:
     if _is_number(v):
         return _nonneg(v)
     if isinstance(v, list) and v and all(isinstance(x, list) for x in v):
-        return _list_of(_point(2), "pairs [lo, hi]", min_n=1)(v)
+        return _list_of(_range, "pairs [lo, hi]", min_n=1)(v)
     if isinstance(v, list):
         return _list_of(_nonneg, "numbers >= 0", min_n=1)(v)
     raise _err("limits", "expected a number, a list of bounds or a list of pairs [lo, hi]", v)
@@ -999,12 +1046,75 @@ def input_hash(data: bytes) -> str:
     return h.hexdigest()
 
 
+#: Largest problem file parsed (bytes).
+MAX_FILE_BYTES = 4 << 20
+#: Deepest nesting of arrays and inline tables accepted in a problem file.
+MAX_NESTING = 32
+#: Most dotted parts accepted in one TOML key (``a.b.c`` has 3).
+MAX_KEY_PARTS = 32
+#: Longest integer literal accepted (digits).
+MAX_INT_DIGITS = 400
+
+_TOML_TOKENS = re.compile(
+    r"#[^\n]*"                                  # comment
+    r'|"""(?:[^"\\]|\\.|"(?!""))*"""'           # multi-line basic string
+    r"|'''[\s\S]*?'''"                          # multi-line literal string
+    r'|"(?:[^"\\\n]|\\.)*"'                     # basic string
+    r"|'[^'\n]*'"                               # literal string
+    r"|[0-9][0-9_]*"                            # digits (integer literals, dates, floats)
+    r"|[\[\]{}=,.\n]"                           # structure
+)
+
+
+def _guard_toml(text: str, filename: str) -> None:
+    """Refuse, before parsing, what would make the parser recurse or allocate without
+    bound: deep nesting, keys with very many dotted parts, huge integer literals."""
+    depth = parts = 0
+    line = 1
+    for m in _TOML_TOKENS.finditer(text):
+        tok = m.group()
+        c = tok[0]
+        if c == "\n":
+            line += 1
+            parts = 0
+        elif c in "\"'":
+            line += tok.count("\n")
+        elif c in "[{":
+            depth += 1
+            parts = 0
+            if depth > MAX_NESTING:
+                raise ProblemFileError(f"{filename}: line {line}: arrays and tables nested more "
+                                       f"than {MAX_NESTING} deep; flatten the file")
+        elif c in "]}":
+            depth = max(0, depth - 1)
+            parts = 0
+        elif c in "=,":
+            parts = 0
+        elif c == ".":
+            parts += 1
+            if parts >= MAX_KEY_PARTS:
+                raise ProblemFileError(f"{filename}: line {line}: a key with more than "
+                                       f"{MAX_KEY_PARTS} dotted parts; use tables instead")
+        elif c.isdigit() and len(tok) > MAX_INT_DIGITS:
+            raise ProblemFileError(f"{filename}: line {line}: a number with {len(tok)} digits; "
+                                   f"at most {MAX_INT_DIGITS} are read")
+
+
 def parse_toml(data: bytes, filename: str) -> dict[str, Any]:
-    """Parse TOML bytes; errors become ``file: line L, column C: ...``."""
+    """Parse TOML bytes; errors become ``file: line L, column C: ...``.
+
+    Size, nesting, dotted keys and integer literals are bounded before parsing
+    (:data:`MAX_FILE_BYTES`, :data:`MAX_NESTING`, :data:`MAX_KEY_PARTS`,
+    :data:`MAX_INT_DIGITS`), so no file can exhaust the parser's stack or memory.
+    """
+    if len(data) > MAX_FILE_BYTES:
+        raise ProblemFileError(f"{filename}: (file): {len(data)} bytes is larger than the "
+                               f"{MAX_FILE_BYTES} bytes a problem file may have")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
         raise ProblemFileError(f"{filename}: (file): not UTF-8 text ({e.reason} at byte {e.start})") from None
+    _guard_toml(text, filename)
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -1015,6 +1125,9 @@ def parse_toml(data: bytes, filename: str) -> dict[str, Any]:
         if m is None and "end of document" in msg:
             where = "end of file"
         raise ProblemFileError(f"{filename}: {where}: invalid TOML: {reason}") from None
+    except (ValueError, RecursionError, MemoryError, OverflowError) as e:
+        raise ProblemFileError(f"{filename}: (file): invalid TOML: {type(e).__name__}: "
+                               f"{str(e)[:120]}") from None
 
 
 def validate_document(doc: Any, filename: str = "<problem>") -> ProblemFile:

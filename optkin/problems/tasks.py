@@ -21,9 +21,12 @@ from typing import Any
 
 import numpy as np
 
+from optkin._dryrun import Checked, computing, strict_options, validating
+from optkin.errors import MechanismError
 from optkin.problems.schema import TaskBase
 
-__all__ = ["TASKS", "TaskContext", "register", "run_task", "library_function", "jsonable"]
+__all__ = ["TASKS", "OPTIONS", "OptionSpec", "TaskContext", "check_options", "check_task",
+           "jsonable", "library_function", "register", "run_task"]
 
 
 @dataclasses.dataclass
@@ -55,14 +58,63 @@ TaskFunction = Callable[[Any, TaskBase, TaskContext], dict[str, Any]]
 TASKS: dict[str, TaskFunction] = {}
 
 
-def register(kind: str) -> Callable[[TaskFunction], TaskFunction]:
-    """Decorator registering a task function for ``kind``."""
+@dataclasses.dataclass(frozen=True)
+class OptionSpec:
+    """Which ``options`` a task kind accepts: the keys of a library ``*_DEFAULTS`` mapping
+    (``defaults``, dotted under ``optkin``), or the keyword parameters of the library
+    function ``function`` minus those the task sets itself (``explicit``)."""
+
+    function: str
+    defaults: str | None = None
+    explicit: tuple[str, ...] = ()
+
+    def allowed(self) -> list[str]:
+        if self.defaults is not None:
+            module, _, name = self.defaults.rpartition(".")
+            return sorted(getattr(importlib.import_module(f"optkin.{module}"), name))
+        import inspect
+
+        fn = library_function(self.function, self.function)
+        params = list(inspect.signature(fn).parameters.values())[1:]  # after mech
+        return sorted(p.name for p in params
+                      if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+                      and p.name not in self.explicit)
+
+
+#: Task kind -> the options it accepts.
+OPTIONS: dict[str, OptionSpec] = {}
+
+
+def register(kind: str, options: OptionSpec | None = None
+             ) -> Callable[[TaskFunction], TaskFunction]:
+    """Decorator registering a task function for ``kind`` (and the options it accepts)."""
 
     def deco(fn: TaskFunction) -> TaskFunction:
         TASKS[kind] = fn
+        if options is not None:
+            OPTIONS[kind] = options
         return fn
 
     return deco
+
+
+def check_options(task: Any) -> None:
+    """Raise a MechanismError (with ``path = ("options", name)``) for an option the task's
+    library function does not know; problem files treat unknown options as errors."""
+    spec = OPTIONS.get(str(getattr(task, "kind", "")))
+    opts = dict(getattr(task, "options", {}) or {})
+    if spec is None or not opts:
+        return
+    allowed = spec.allowed()
+    for k in opts:
+        if k not in allowed:
+            import difflib
+
+            hint = difflib.get_close_matches(k, allowed, n=1)
+            extra = f"; did you mean {hint[0]!r}?" if hint else ""
+            raise MechanismError(
+                f"unknown option {k!r} of {spec.function}; known options: "
+                f"{', '.join(allowed) or 'none'}{extra}", path=("options", k))
 
 
 def library_function(dotted: str, kind: str) -> Callable[..., Any]:
@@ -122,6 +174,37 @@ def _vector(v: Any, names: Sequence[str], fill: Sequence[float] | None = None) -
     return [float(x) for x in v]
 
 
+def _home_q(mech: Any) -> list[float]:
+    """All joint values at the mechanism's home configuration (where a guess table that
+    names only some joints takes the others from)."""
+    home = getattr(mech, "home", None)
+    names = list(mech.joint_names)
+    if home is not None and len(home) == len(names):
+        return [float(x) for x in home]
+    try:  # a platform's home is its task coordinates: the first posture there
+        with computing():
+            sols = library_function("inverse", "inverse")(mech, np.asarray(home, dtype=float))
+        if len(sols):
+            return [float(x) for x in sols[0].q]
+    except Exception:  # noqa: BLE001 - fall back to zeros below
+        pass
+    return [0.0] * len(names)
+
+
+def _guess(mech: Any, v: Any) -> Any:
+    """A guess from a list (passed on as is) or a table by joint name: joints the table
+    does not name take their values at the home configuration."""
+    if not isinstance(v, Mapping):
+        return _vector(v, mech.joint_names)
+    names = list(mech.joint_names)
+    for k in v:
+        if k not in names:
+            raise MechanismError(f"unknown joint {k!r}; joints: {', '.join(names)}",
+                                 path=("guess", k))
+    fill = _home_q(mech)
+    return [float(v[n]) if n in v else fill[i] for i, n in enumerate(names)]
+
+
 def _pose(v: Any) -> Any:
     return None if v is None else np.asarray(v, dtype=float)
 
@@ -169,7 +252,8 @@ def _q_of(mech: Any, task: Any, ctx: TaskContext) -> Any:
         return _vector(q, mech.joint_names, getattr(mech, "home", None))
     qa = getattr(task, "qa", None)
     if qa is not None:
-        res = library_function("forward", "forward")(mech, _vector(qa, mech.active_names))
+        with computing():  # the configuration is an input of the task, also when validating
+            res = library_function("forward", "forward")(mech, _vector(qa, mech.active_names))
         if not res.success:
             raise ValueError(f"forward kinematics at qa = {list(qa)} failed: {res.message}")
         ctx.notes.append("configuration solved from qa by forward kinematics")
@@ -182,20 +266,19 @@ def _q_of(mech: Any, task: Any, ctx: TaskContext) -> Any:
 # ---------------------------------------------------------------------------
 
 
-@register("forward")
+@register("forward", OptionSpec("forward", "solvers.forward.FORWARD_DEFAULTS"))
 def forward_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.forward(mech, qa, guess, **options)``; pictures the configuration."""
     fn = library_function("forward", "forward")
     qa = _vector(task.qa, mech.active_names)
-    guess = _vector(task.guess, mech.joint_names, getattr(mech, "home", None))
-    res = fn(mech, qa, guess=guess, **dict(task.options))
+    res = fn(mech, qa, guess=_guess(mech, task.guess), **dict(task.options))
     out = _kin_output(mech, res)
     if task.draw and res.success:
         out["pictures"] = _draw(mech, res, ctx)
     return out
 
 
-@register("inverse")
+@register("inverse", OptionSpec("inverse", "solvers.inverse.INVERSE_DEFAULTS"))
 def inverse_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.inverse(mech, pose, **options)``: every posture; pictures them all."""
     fn = library_function("inverse", "inverse")
@@ -250,7 +333,7 @@ def _kw(task: Any, *keys: str) -> dict[str, Any]:
     return {k: getattr(task, k) for k in keys if getattr(task, k, None) is not None}
 
 
-@register("assembly_modes")
+@register("assembly_modes", OptionSpec("assembly_modes", "solvers.enumerate.ASSEMBLY_DEFAULTS"))
 def assembly_modes_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.assembly_modes(mech, qa, seed=seed, **options)``."""
     fn = library_function("assembly_modes", "assembly_modes")
@@ -266,23 +349,23 @@ def assembly_modes_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any
     return out
 
 
-@register("track")
+@register("track", OptionSpec("track", "solvers.enumerate.TRACK_DEFAULTS"))
 def track_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.track(mech, qa_path, guess, **options)``."""
     fn = library_function("track", "track")
     path = [_vector(p, mech.active_names) for p in task.qa_path]
-    guess = _vector(task.guess, mech.joint_names, getattr(mech, "home", None))
+    guess = _guess(mech, task.guess)
     return _generic(fn(mech, np.asarray(path, dtype=float), guess, **dict(task.options)))
 
 
-@register("jacobians")
+@register("jacobians", OptionSpec("jacobians", explicit=("q",)))
 def jacobians_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.jacobians(mech, q, **options)`` at ``q`` (or solved from ``qa``)."""
     fn = library_function("jacobians", "jacobians")
     return _generic(fn(mech, _q_of(mech, task, ctx), **dict(task.options)))
 
 
-@register("dof")
+@register("dof", OptionSpec("dof"))
 def dof_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.dof(mech[, q], **options)``."""
     fn = library_function("dof", "dof")
@@ -295,14 +378,15 @@ def dof_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     return _generic(fn(mech, **kw))
 
 
-@register("classify")
+@register("classify", OptionSpec("classify", "analysis.singularity.CLASSIFY_DEFAULTS"))
 def classify_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.classify(mech, q, **options)`` at ``q`` (or solved from ``qa``)."""
     fn = library_function("classify", "classify")
     return _generic(fn(mech, _q_of(mech, task, ctx), **dict(task.options)))
 
 
-@register("singular_curves")
+@register("singular_curves", OptionSpec("singular_curves", explicit=(
+    "plane", "kind", "fixed", "limits", "grid", "bounds")))
 def singular_curves_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.singular_curves(mech, plane=..., kind=curves, fixed=..., ...)`` (+ a PNG)."""
     fn = library_function("singular_curves", "singular_curves")
@@ -322,7 +406,7 @@ def _with_picture(out: dict[str, Any], res: Any, ctx: TaskContext) -> dict[str, 
     return out
 
 
-@register("working_modes")
+@register("working_modes", OptionSpec("working_modes", explicit=("pose",)))
 def working_modes_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.working_modes(mech[, pose=...], **options)``."""
     fn = library_function("working_modes", "working_modes")
@@ -330,7 +414,7 @@ def working_modes_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]
     return _generic(fn(mech, **kw, **dict(task.options)))
 
 
-@register("aspects")
+@register("aspects", OptionSpec("aspects", explicit=("fixed", "limits", "grid", "bounds")))
 def aspects_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.aspects(mech, fixed=..., limits=..., grid=..., bounds=..., **options)``."""
     fn = library_function("aspects", "aspects")
@@ -338,7 +422,7 @@ def aspects_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     return _with_picture(_generic(res), res, ctx)
 
 
-@register("workspace")
+@register("workspace", OptionSpec("workspace", explicit=("fixed", "limits", "grid", "bounds")))
 def workspace_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.workspace(mech, fixed=..., limits=..., grid=..., bounds=..., **options)``."""
     fn = library_function("workspace", "workspace")
@@ -346,15 +430,17 @@ def workspace_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     return _with_picture(_generic(res), res, ctx)
 
 
-@register("statics")
+@register("statics", OptionSpec("statics", "statics.core.STATICS_DEFAULTS"))
 def statics_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.statics.capability / feasible / distribute`` at ``q``, ``qa`` or ``pose``."""
     fn = library_function(f"statics.{task.analysis}", "statics")
     if getattr(task, "pose", None) is not None:
-        sols = library_function("inverse", "inverse")(mech, _pose(task.pose))
+        with computing():  # the configuration is an input of the task, also when validating
+            sols = library_function("inverse", "inverse")(mech, _pose(task.pose))
         if len(sols) <= task.posture:
-            raise ValueError(f"pose {list(task.pose)}: no posture {task.posture} "
-                             f"({len(sols)} postures)")
+            raise MechanismError(f"pose {list(task.pose)} has {len(sols)} posture(s), so there "
+                                 f"is no posture {task.posture}; posture counts from 0",
+                                 path=("posture",))
         q = sols[task.posture]
         ctx.notes.append(f"configuration solved from pose by inverse (posture {task.posture})")
     else:
@@ -385,12 +471,44 @@ def statics_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
 
 
 def run_task(mech: Any, task: TaskBase, ctx: TaskContext) -> dict[str, Any]:
-    """Run one task through the registry (exceptions propagate to the runner)."""
+    """Run one task through the registry (exceptions propagate to the runner).
+
+    Unknown options are errors here (as everywhere in problem files).
+    """
     kind = getattr(task, "kind", None)
     fn = TASKS.get(str(kind))
     if fn is None:
         raise NotImplementedError(f"task kind {kind!r} has no runner in this version of optkin")
-    out = fn(mech, task, ctx)
+    check_options(task)
+    with strict_options():
+        out = fn(mech, task, ctx)
     if not isinstance(out, dict):
         out = {"value": jsonable(out)}
     return out
+
+
+def check_task(mech: Any, task: TaskBase, index: int, filename: str) -> None:
+    """Every check running ``task`` would make, without its work (``optkin validate``).
+
+    The task function runs in :func:`optkin._dryrun.validating` mode: the library
+    functions check their arguments and stop at their checkpoint. A failed check raises
+    :class:`~optkin.errors.ProblemFileError` as ``file: task[i].key: message``.
+    """
+    from optkin.errors import OptkinError, ProblemFileError
+    from optkin.problems.schema import format_key_path
+
+    def fail(e: Exception) -> ProblemFileError:
+        path = list(getattr(e, "path", ()) or ())
+        where = format_key_path(["task", index, *path])
+        msg = str(e)
+        return ProblemFileError(f"{filename}: {where}: {msg}")
+
+    try:
+        with validating():
+            run_task(mech, task, TaskContext(filename, index, None))
+    except Checked:
+        return
+    except NotImplementedError as e:
+        raise fail(e) from None
+    except (OptkinError, ValueError, TypeError, IndexError, KeyError, ArithmeticError) as e:
+        raise fail(e) from None

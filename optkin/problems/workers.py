@@ -1,0 +1,471 @@
+"""Worker processes that run problem files under per-task time limits.
+
+The process that reads the command line never runs a problem itself. Each worker is a
+fresh Python process started with :mod:`subprocess` (so it also works inside Dask's
+daemonic worker processes), importing the *same* optkin package as the parent whatever
+the working directory holds. A worker receives a problem as bytes, loads and validates it,
+and reports the start and the end of every task over a pipe. The parent keeps the deadline
+of the task in flight: a task that overruns its time limit has its worker killed (a stuck
+native call cannot be interrupted any other way), a worker that dies (the out-of-memory
+killer, a crash in a C library) is noticed at once; either way the task is recorded as an
+``error`` with the reason, the tasks already finished are kept, and the problem's remaining
+tasks go to a fresh worker. Nothing else is lost.
+
+Idle workers are kept for the next run in the same process (a notebook, the tests), keyed
+by the environment they were started with.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import os
+import pickle
+import queue
+import signal
+import struct
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import traceback
+import weakref
+from collections import deque
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["Job", "JobOutcome", "run_jobs", "DEFAULT_TIME_LIMIT", "MAX_TIME_LIMIT"]
+
+#: Seconds a task may run when neither the task (``time_limit``) nor the run
+#: (``--time-limit``) says otherwise. Loading a problem and building its model have the
+#: same limit.
+DEFAULT_TIME_LIMIT = 600.0
+#: Largest accepted time limit (one day).
+MAX_TIME_LIMIT = 86400.0
+#: Extra seconds granted after a deadline before the worker is killed (message latency).
+_GRACE = 0.5
+#: Largest message accepted on a worker pipe (a corrupt length never allocates more).
+_MAX_MESSAGE = 1 << 31
+#: A worker that dies this many times while loading the same problem fails that problem.
+_MAX_SETUP_DEATHS = 2
+#: Seconds a new worker may take to import optkin and say it is ready.
+_START_LIMIT = 120.0
+
+
+# ---------------------------------------------------------------------------
+# framing: 8-byte length + pickle, over raw pipe file descriptors
+# ---------------------------------------------------------------------------
+
+
+def _send(fd: int, obj: Any) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    view = memoryview(struct.pack("<Q", len(data)) + data)
+    while view:
+        n = os.write(fd, view)
+        view = view[n:]
+
+
+def _read_exactly(fd: int, n: int) -> bytes:
+    chunks = []
+    while n:
+        b = os.read(fd, min(n, 1 << 20))
+        if not b:
+            raise EOFError
+        chunks.append(b)
+        n -= len(b)
+    return b"".join(chunks)
+
+
+def _recv(fd: int) -> Any:
+    (n,) = struct.unpack("<Q", _read_exactly(fd, 8))
+    if n > _MAX_MESSAGE:
+        raise EOFError(f"message of {n} bytes refused")
+    return pickle.loads(_read_exactly(fd, n))
+
+
+# ---------------------------------------------------------------------------
+# the worker side
+# ---------------------------------------------------------------------------
+
+
+def _die_with_parent(parent: int) -> None:
+    """Linux: get SIGKILL when the parent dies (a killed run leaves no orphan running)."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # the parent died before prctl took effect
+        os._exit(1)
+
+
+def serve(rfd: int, wfd: int, parent: int) -> None:
+    """Worker main loop: read jobs from ``rfd``, report on ``wfd`` until told to exit."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
+    _die_with_parent(parent)
+    import optkin
+    from optkin.problems import runner
+
+    _send(wfd, ("ready", {"pid": os.getpid(),
+                          "optkin": str(Path(optkin.__file__).resolve().parent),
+                          "version": getattr(optkin, "__version__", "")}))
+    while True:
+        try:
+            msg = _recv(rfd)
+        except EOFError:
+            return
+        if msg[0] == "exit":
+            return
+        _, jid, spec = msg
+        try:
+            _send(wfd, runner.worker_job(jid, spec, lambda m: _send(wfd, m)))
+        except BrokenPipeError:
+            return
+        except BaseException as e:  # noqa: BLE001 - report anything, keep serving
+            _send(wfd, ("error", jid, f"{type(e).__name__}: {e}",
+                        "".join(traceback.format_exception(e)[-4:])))
+
+
+_BOOT = (
+    "import sys\n"
+    "root, rfd, wfd, parent = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])\n"
+    # the parent's optkin first; never the working directory ('' for python -c)
+    "sys.path[:] = [root] + [p for p in sys.path if p not in ('', '.', root)]\n"
+    "from optkin.problems.workers import serve\n"
+    "serve(rfd, wfd, parent)\n"
+)
+
+
+# ---------------------------------------------------------------------------
+# the parent side
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class Job:
+    """One problem to run (or only validate) in a worker.
+
+    ``tasks`` collects the records of tasks already finished: when a worker dies they are
+    sent to the next one, which skips them.
+    """
+
+    key: str
+    spec: dict[str, Any]
+    tasks: dict[int, dict[str, Any]] = field(default_factory=dict)
+    pictures: dict[str, bytes] = field(default_factory=dict)
+    setup_deaths: int = 0
+
+
+@dataclass
+class JobOutcome:
+    """What became of a job: ``kind`` is ``"done"``, ``"invalid"`` or ``"error"``."""
+
+    key: str
+    kind: str
+    result: dict[str, Any] | None = None
+    pictures: dict[str, bytes] = field(default_factory=dict)
+    message: str = ""
+
+
+class _Worker:
+    """A worker process, its pipes, and the reader thread feeding the shared queue."""
+
+    def __init__(self, env: dict[str, str], events: queue.Queue) -> None:
+        import optkin
+
+        root = str(Path(optkin.__file__).resolve().parent.parent)
+        p2c_r, p2c_w = os.pipe()
+        c2p_r, c2p_w = os.pipe()
+        self.stderr = tempfile.TemporaryFile()
+        try:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-c", _BOOT, root, str(p2c_r), str(c2p_w), str(os.getpid())],
+                pass_fds=(p2c_r, c2p_w), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                stderr=self.stderr, env=env, start_new_session=True)
+        finally:
+            os.close(p2c_r)
+            os.close(c2p_w)
+        self.wfd, self.rfd = p2c_w, c2p_r
+        self.events = events
+        self.job: Job | None = None
+        self.deadline: float | None = None
+        self.task: int | None = None
+        self.limit = 0.0
+        self.started = time.monotonic()
+        self.ready = False
+        self.info: dict[str, Any] = {}
+        self.dead = False
+        # a worker that cannot even start (broken installation) must not hang the run
+        self.deadline = time.monotonic() + _START_LIMIT
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+        _LIVE.add(self)
+
+    def _read(self) -> None:
+        while True:
+            try:
+                msg = _recv(self.rfd)
+            except (EOFError, OSError, pickle.UnpicklingError, struct.error):
+                self.events.put((self, None))
+                return
+            self.events.put((self, msg))
+
+    def send(self, msg: Any) -> bool:
+        try:
+            _send(self.wfd, msg)
+            return True
+        except OSError:
+            return False
+
+    def kill(self) -> None:
+        with contextlib.suppress(OSError):
+            self.proc.kill()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.proc.wait(timeout=10)
+
+    def close(self) -> None:
+        self.send(("exit",))
+        try:
+            self.proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            self.kill()
+        for fd in (self.wfd, self.rfd):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self.stderr.close()
+
+    def death_reason(self) -> str:
+        """Why the worker ended (its exit status and the tail of what it printed)."""
+        code = self.proc.poll()
+        if code is None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                code = self.proc.wait(timeout=5)
+        if code is not None and code < 0:
+            try:
+                name = signal.Signals(-code).name
+            except ValueError:
+                name = str(-code)
+            why = f"the worker process was killed by {name}"
+            if -code == signal.SIGKILL:
+                why += " (for example by the out-of-memory killer)"
+        else:
+            why = f"the worker process exited with status {code}"
+        try:
+            self.stderr.seek(0, os.SEEK_END)
+            size = self.stderr.tell()
+            self.stderr.seek(max(0, size - 400))
+            tail = self.stderr.read().decode(errors="replace").strip().splitlines()
+        except OSError:
+            tail = []
+        if tail:
+            why += f"; it printed: {tail[-1][:200]}"
+        return why
+
+
+#: Every worker process alive in this process (for inspection and for cleanup).
+_LIVE: weakref.WeakSet[_Worker] = weakref.WeakSet()
+
+
+def _env_key(env: dict[str, str]) -> tuple:
+    return tuple(sorted(env.items()))
+
+
+_IDLE: dict[tuple, list[_Worker]] = {}
+_IDLE_LOCK = threading.Lock()
+
+
+def _worker_env(threads: int | None) -> dict[str, str]:
+    env = dict(os.environ)
+    if threads is not None:  # one BLAS / OpenMP thread per worker when several run
+        for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            env.setdefault(k, str(threads))
+    return env
+
+
+def _checkout(env: dict[str, str], events: queue.Queue) -> _Worker:
+    with _IDLE_LOCK:
+        pool = _IDLE.get(_env_key(env), [])
+        while pool:
+            w = pool.pop()
+            if w.proc.poll() is None:
+                w.events = events
+                return w
+            w.close()
+    return _Worker(env, events)
+
+
+def _checkin(w: _Worker, env: dict[str, str], keep: int) -> None:
+    if w.dead or w.proc.poll() is not None:
+        w.close()
+        return
+    with _IDLE_LOCK:
+        pool = _IDLE.setdefault(_env_key(env), [])
+        if len(pool) < keep:
+            pool.append(w)
+            return
+    w.close()
+
+
+@atexit.register
+def _close_idle() -> None:
+    with _IDLE_LOCK:
+        workers = [w for pool in _IDLE.values() for w in pool]
+        _IDLE.clear()
+    for w in workers:
+        w.close()
+
+
+def run_jobs(
+    jobs: Iterable[Job],
+    n_workers: int = 1,
+    time_limit: float = DEFAULT_TIME_LIMIT,
+    on_outcome: Callable[[JobOutcome], None] | None = None,
+    threads: int | None = None,
+) -> list[JobOutcome]:
+    """Run ``jobs`` on up to ``n_workers`` worker processes; return their outcomes.
+
+    ``time_limit`` bounds loading each problem (its tasks bring their own limits, the
+    worker falling back to the run's default). A task past its limit, or a worker that
+    dies, becomes an ``error`` record of that task; the problem goes on in a new worker.
+    ``on_outcome`` is called as each job ends (in the calling thread).
+    """
+    pending: deque[Job] = deque(jobs)
+    outcomes: list[JobOutcome] = []
+    if not pending:
+        return outcomes
+    env = _worker_env(threads)
+    events: queue.Queue = queue.Queue()
+    workers: list[_Worker] = []
+    n_workers = max(1, min(n_workers, len(pending)))
+
+    def finish(o: JobOutcome) -> None:
+        outcomes.append(o)
+        if on_outcome is not None:
+            on_outcome(o)
+
+    def assign(w: _Worker) -> None:
+        if not pending or not w.ready:
+            return
+        job = pending.popleft()
+        spec = dict(job.spec, done_tasks=job.tasks, time_limit=time_limit)
+        w.job, w.task = job, None
+        w.limit = time_limit
+        w.deadline = time.monotonic() + time_limit + _GRACE
+        if not w.send(("run", job.key, spec)):
+            pending.appendleft(job)
+            w.job = w.deadline = None
+            w.dead = True
+
+    start_failures = []
+
+    def abandon(w: _Worker, why: str) -> None:
+        """The worker is gone: record its task (if any) and requeue the rest."""
+        w.dead = True
+        if not w.ready:  # it never started: after two such deaths, stop trying
+            start_failures.append(why)
+            if len(start_failures) >= 2:
+                while pending:
+                    job = pending.popleft()
+                    finish(JobOutcome(job.key, "error",
+                                      message=f"cannot start a worker process: {why}"))
+            return
+        job = w.job
+        w.job = w.deadline = None
+        if job is None:
+            return
+        if w.task is None:  # died while loading or building the model
+            job.setup_deaths += 1
+            if job.setup_deaths >= _MAX_SETUP_DEATHS:
+                finish(JobOutcome(job.key, "error", message=f"{why} while loading the problem"))
+                return
+        else:
+            job.tasks[w.task] = {"abandoned": True, "message": why,
+                                 "time": time.monotonic() - w.started}
+        pending.appendleft(job)
+
+    try:
+        while pending or any(w.job is not None for w in workers):
+            workers = [w for w in workers if not w.dead]
+            while len(workers) < n_workers and len(workers) < len(pending) + sum(
+                    w.job is not None for w in workers):
+                workers.append(_checkout(env, events))
+            for w in workers:
+                if w.job is None and w.ready:
+                    assign(w)
+            now = time.monotonic()
+            deadlines = [w.deadline for w in workers if w.deadline is not None]
+            timeout = max(0.0, min(deadlines) - now) if deadlines else None
+            try:
+                w, msg = events.get(timeout=timeout)
+            except queue.Empty:
+                w, msg = None, None
+            if w is not None and w not in workers:  # a stale message from a killed worker
+                continue
+            if w is None:  # a deadline passed
+                now = time.monotonic()
+                for x in workers:
+                    if x.deadline is not None and now >= x.deadline:
+                        where = (f"task[{x.task}]" if x.task is not None
+                                 else "loading the problem")
+                        x.kill()
+                        abandon(x, f"time limit of {x.limit:g} s exceeded ({where}); the "
+                                   "work was abandoned: raise the task's time_limit (or "
+                                   "--time-limit) if it needs longer")
+                continue
+            if msg is None:  # EOF: the worker died
+                why = w.death_reason()
+                w.kill()
+                abandon(w, why)
+                continue
+            tag = msg[0]
+            if tag == "ready":
+                import optkin
+
+                mine = str(Path(optkin.__file__).resolve().parent)
+                if msg[1].get("optkin") != mine:  # never run another optkin's code
+                    w.kill()
+                    abandon(w, f"the worker imported optkin from {msg[1].get('optkin')}, "
+                               f"not {mine}")
+                else:
+                    w.ready, w.info, w.deadline = True, msg[1], None
+                continue
+            job = w.job
+            if job is None or msg[1] != job.key:
+                continue
+            if tag == "task":
+                _, _, i, limit = msg
+                limit = time_limit if limit is None else limit
+                w.task, w.limit, w.started = i, float(limit), time.monotonic()
+                w.deadline = time.monotonic() + float(limit) + _GRACE
+            elif tag == "task_done":
+                _, _, i, record, pics = msg
+                job.tasks[i] = record
+                job.pictures.update(pics)
+                w.task = None
+                w.limit = time_limit
+                w.deadline = time.monotonic() + time_limit + _GRACE
+            elif tag in ("done", "invalid", "error"):
+                w.job = w.deadline = w.task = None
+                if tag == "done":
+                    finish(JobOutcome(job.key, "done", msg[2], job.pictures))
+                else:
+                    finish(JobOutcome(job.key, tag, message=msg[2]))
+    except BaseException:
+        for w in workers:
+            w.kill()
+            w.dead = True
+        raise
+    finally:
+        for w in workers:
+            if w.job is not None:
+                w.kill()
+                w.dead = True
+            _checkin(w, env, n_workers)
+    return outcomes
