@@ -237,11 +237,15 @@ class SolutionSet(Sequence):
         return self._sols[int(np.argmin(d))]
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict; ``success``, ``status`` and ``message`` of ``info`` (when the
+        producer sets them, e.g. assembly_modes, track) are repeated at the top level."""
+        head = {k: self.info[k] for k in ("success", "status", "message") if k in self.info}
         return _jsonable(
             {
                 "kind": self.kind,
                 "count": len(self._sols),
                 "seed": self.seed,
+                **head,
                 "info": self.info,
                 "solutions": [s.to_dict() for s in self._sols],
             }

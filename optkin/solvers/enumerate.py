@@ -63,6 +63,7 @@ mechanism (Chablat and Wenger, seed 004, Definition 4) and, at a pose, which exi
 from __future__ import annotations
 
 import itertools
+import numbers
 import time
 import warnings
 from collections.abc import Iterator, Sequence
@@ -73,7 +74,18 @@ import casadi as ca
 import numpy as np
 from scipy.stats import chi2, qmc
 
+from .._checks import MAX_ABS, as_float, as_int, as_matrix, as_vector
 from ..errors import MechanismError
+from ..limits import (
+    MAX_ITERATIONS,
+    MAX_THREADS,
+    Deadline,
+    check_size,
+    check_sizes,
+    floor_pow2,
+    show,
+    time_budget,
+)
 from ..mechanism import Mechanism
 from ..mechanism.geometry import wrap_angle
 from ..model import Model, get_model
@@ -235,6 +247,8 @@ def shoemake(U: np.ndarray) -> np.ndarray:
 
 
 _SOBOL: dict[int, np.ndarray] = {}
+#: Sobol points per dimension kept in the process-wide cache (beyond: generated per run).
+_SOBOL_CACHED = 1 << 16
 _FORM_OK: dict[str, bool] = {}
 
 
@@ -251,17 +265,26 @@ class _ShiftedSobol:
         self.dim = dim
         self.shift = np.random.default_rng(seed).random(dim)
         self.pos = 0
+        self.engine: qmc.Sobol | None = None
 
     def random(self, n: int) -> np.ndarray:
-        base = _SOBOL.get(self.dim)
         need = self.pos + n
-        if base is None or base.shape[0] < need:
-            m = max(1024, 1 << int(np.ceil(np.log2(need))))
+        if need <= _SOBOL_CACHED:
+            base = _SOBOL.get(self.dim)
+            if base is None or base.shape[0] < need:
+                m = max(1024, 1 << int(np.ceil(np.log2(need))))
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    base = qmc.Sobol(self.dim, scramble=False).random(m)
+                _SOBOL[self.dim] = base
+            U = base[self.pos:need] + self.shift
+        else:  # past the cached points: the same sequence from an engine of its own
+            if self.engine is None:
+                self.engine = qmc.Sobol(self.dim, scramble=False)
+                self.engine.fast_forward(self.pos)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                base = qmc.Sobol(self.dim, scramble=False).random(m)
-            _SOBOL[self.dim] = base
-        U = base[self.pos:need] + self.shift
+                U = self.engine.random(n) + self.shift
         self.pos = need
         return U - np.floor(U)
 
@@ -302,7 +325,7 @@ class _Starts:
                 if np.any(lo > hi + 1e-12 * model.length):
                     k = int(np.argmax(lo - hi))
                     self.empty_reason = (
-                        f"no closed configuration: the legs cannot all reach a common platform "
+                        f"the legs cannot all reach a common platform "
                         f"position (their reach boxes do not overlap along axis {'xyz'[k]})"
                     )
                 hi = np.maximum(hi, lo)
@@ -454,6 +477,213 @@ def _canon(model: Model, X: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------
+# inputs, memory
+# ---------------------------------------------------------------------------------------------
+
+_NO_MODE = "no closed configuration exists for these actuated values: "
+#: Stalled starts kept per IPOPT rescue (the best residuals; the others are dropped).
+_STALLED_PER_RESCUE = 4
+#: Entries (columns x solutions x unknowns) of one block of distances.
+_DIST_BLOCK = 1 << 18
+#: Largest pool of columns (one mapped call; clustering the new solutions of one call
+#: costs width^2 in the worst case).
+MAX_WIDTH = 1 << 16
+
+# Measured memory (peak resident growth, /proc/self/status VmHWM, of a fresh process) of
+# assembly_modes: per column of the pool (the mapped step's inputs and outputs and their
+# copies, the starts generated for it, the masks, one block of distances), per start (on
+# a continuum of configurations every start becomes a solution of its own: its column,
+# hit count, sort key and KinResult), per stalled start kept for the rescues. Each figure
+# is a + b * nx bytes (nx unknowns); limits.SAFETY is applied on top.
+_COST_COLUMN = (200.0, 160.0)
+_COST_START = (6000.0, 400.0)
+_COST_STALLED = (200.0, 8.0)
+
+
+def _assembly_costs(model: Model) -> tuple[float, float, float]:
+    nx = model.nx
+    return tuple(a + b * nx for a, b in (_COST_COLUMN, _COST_START, _COST_STALLED))
+
+
+def _check_size_of(model: Model, where: str) -> None:
+    """A mechanism of a size beyond MAX_ABS overflows every square (1e300 ** 2)."""
+    L = float(model.length)
+    if not (np.isfinite(L) and L <= MAX_ABS):
+        raise MechanismError(
+            f"{where}: the mechanism's size {L:g} is too large (above {MAX_ABS:g}): squares "
+            "of its lengths overflow; give lengths of sensible size (change the unit)")
+
+
+def _qa_arg(model: Model, qa: Any, where: str = "qa") -> np.ndarray:
+    """Active joint values: finite numbers (any input), then the usual shape and leg checks."""
+    return check_qa(model, as_vector(qa, where, names=list(model.mech.active_names)))
+
+
+def _guess_arg(guess: Any, where: str = "guess") -> Any:
+    """A guess as numbers (any input): None and KinResults pass, 2-D arrays stay 2-D."""
+    if guess is None or isinstance(guess, KinResult):
+        return guess
+    try:
+        return as_matrix(guess, where)
+    except MechanismError:
+        return as_vector(guess, where)
+
+
+def _opt_float(opts: dict[str, Any], key: str, where: str, *, lo: float = 0.0,
+               hi: float | None = None, positive: bool = False) -> float:
+    v = as_float(opts[key], f"{where}: option {key}", lo=lo, hi=hi)
+    if positive and not v > 0:
+        raise MechanismError(f"{where}: option {key} must be a number > 0, got {v:g}")
+    return v
+
+
+def _opt_int(opts: dict[str, Any], key: str, where: str, *, lo: int = 0,
+             hi: int | None = MAX_ITERATIONS) -> int:
+    return as_int(opts[key], f"{where}: option {key}", lo=lo, hi=hi)
+
+
+def _opt_auto(opts: dict[str, Any], key: str, where: str, conv) -> Any:
+    v = opts[key]
+    if isinstance(v, str):
+        if v == "auto":
+            return v
+        raise MechanismError(f"{where}: option {key} must be 'auto' or a number, got {show(v)}")
+    return conv(v)
+
+
+def _assembly_options(opts: dict[str, Any], model: Model) -> dict[str, Any]:
+    """Every option of assembly_modes converted and checked (MechanismError naming it)."""
+    w = "assembly_modes"
+    o: dict[str, Any] = {}
+    o["tol"] = _opt_float(opts, "tol", w, positive=True)
+    o["starts"] = _opt_int(opts, "starts", w, lo=1, hi=None)
+    o["min_starts"] = _opt_auto(opts, "min_starts", w,
+                                lambda v: as_int(v, f"{w}: option min_starts", lo=0))
+    o["target"] = _opt_float(opts, "target", w)
+    o["target_upper"] = _opt_float(opts, "target_upper", w)
+    tb = time_budget()
+    tl = as_float(opts["time_limit"], f"{w}: option time_limit", lo=0.0, finite=False)
+    if tl > tb:
+        raise MechanismError(
+            f"{w}: option time_limit = {tl:g} s exceeds the time budget of {tb:g} s "
+            "(OPTKIN_TIME_BUDGET); give at most that, or raise the budget")
+    o["time_limit"] = tl
+    b = opts["bound"]
+    if b is None or (isinstance(b, str) and b == "auto"):
+        o["bound"] = b
+    elif isinstance(b, str):
+        raise MechanismError(f"{w}: option bound must be 'auto', None or an integer >= 0 "
+                             f"(the known largest number of assembly modes), got {show(b)}")
+    else:
+        o["bound"] = as_int(b, f"{w}: option bound", lo=0)
+    wd = opts["width"]
+    if isinstance(wd, str) and wd == "auto":
+        o["width"] = wd
+    else:
+        if isinstance(wd, str):
+            raise MechanismError(f"{w}: option width must be a power of 2 or 'auto', got "
+                                 f"{show(wd)}")
+        wd = as_int(wd, f"{w}: option width", lo=1)
+        if wd & (wd - 1):
+            raise MechanismError(f"{w}: option width must be a power of 2 or 'auto', got "
+                                 f"{show(wd)}")
+        o["width"] = wd
+    o["max_iter"] = _opt_int(opts, "max_iter", w, lo=1)
+    o["step_max"] = _opt_auto(opts, "step_max", w, lambda v: _opt_float(
+        {"step_max": v}, "step_max", w, positive=True))
+    o["dedup_tol"] = _opt_float(opts, "dedup_tol", w)
+    o["rescue"] = _opt_int(opts, "rescue", w, lo=0, hi=None)
+    j = opts["jit"]
+    if isinstance(j, (bool, np.bool_)):
+        o["jit"] = bool(j)
+    elif isinstance(j, str) and j in ("auto", "cached"):
+        o["jit"] = j
+    else:
+        raise MechanismError(f"{w}: option jit must be True, False, 'auto' or 'cached', got "
+                             f"{show(j)}")
+    o["threads"] = _opt_int(opts, "threads", w, lo=1, hi=MAX_THREADS)
+    return o
+
+
+class _Columns:
+    """A growable (nx, n) array of columns (amortised appends)."""
+
+    def __init__(self, nx: int) -> None:
+        self.buf = np.zeros((nx, 16))
+        self.n = 0
+
+    def append(self, x: np.ndarray) -> None:
+        if self.n == self.buf.shape[1]:
+            self.buf = np.hstack([self.buf, np.zeros_like(self.buf)])
+        self.buf[:, self.n] = x
+        self.n += 1
+
+    def view(self) -> np.ndarray:
+        return self.buf[:, :self.n]
+
+
+class _Stalled:
+    """The ``keep`` stalled starts of smallest residual (what the rescues may use)."""
+
+    def __init__(self, keep: int) -> None:
+        self.keep = keep
+        self.r: list[float] = []
+        self.x: list[np.ndarray] = []
+
+    def add(self, r: float, x: np.ndarray) -> None:
+        if self.keep <= 0:
+            return
+        self.r.append(r)
+        self.x.append(x.copy())
+        if len(self.r) >= 2 * self.keep:
+            order = np.argsort(self.r, kind="stable")[: self.keep]
+            self.r = [self.r[i] for i in order]
+            self.x = [self.x[i] for i in order]
+
+    def best(self) -> tuple[np.ndarray, np.ndarray]:
+        """(residuals, columns), best first."""
+        if not self.r:
+            return np.zeros(0), np.zeros((0, 0))
+        order = np.argsort(self.r, kind="stable")[: self.keep]
+        return np.array(self.r)[order], np.array(self.x)[order].T
+
+
+def _nearest(model: Model, X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each column of X, the index of the nearest column of Y and the scaled distance
+    (inf without columns); in blocks of Y, so that memory stays bounded."""
+    n, k = X.shape[1], Y.shape[1]
+    arg = np.zeros(n, dtype=int)
+    best = np.full(n, np.inf)
+    if n == 0 or k == 0:
+        return arg, best
+    step = max(1, _DIST_BLOCK // max(1, n * model.nx))
+    rows = np.arange(n)
+    for a in range(0, k, step):
+        D = _scaled_dist(model, X, Y[:, a:a + step])
+        j = np.argmin(D, axis=1)
+        d = D[rows, j]
+        better = d < best
+        best[better] = d[better]
+        arg[better] = j[better] + a
+    return arg, best
+
+
+def _nn_update(model: Model, Y: np.ndarray, s0: int, nn: np.ndarray) -> np.ndarray:
+    """Nearest-neighbour distances of the columns of Y after columns s0: were added (nn
+    holds those of the first s0); in blocks."""
+    s1 = Y.shape[1]
+    nn = np.concatenate([nn[:s0], np.full(s1 - s0, np.inf)])
+    step = max(1, _DIST_BLOCK // max(1, s1 * model.nx))
+    for a in range(s0, s1, step):
+        b = min(s1, a + step)
+        D = _scaled_dist(model, Y[:, a:b], Y)
+        D[np.arange(b - a), np.arange(a, b)] = np.inf
+        nn[a:b] = np.minimum(nn[a:b], D.min(axis=1))
+        nn = np.minimum(nn, D.min(axis=0))
+    return nn
+
+
+# ---------------------------------------------------------------------------------------------
 # assembly_modes
 # ---------------------------------------------------------------------------------------------
 
@@ -512,6 +742,19 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         ``target_upper``), ``time_limit`` (s), ``bound`` (known maximum count, ``"auto"``
         uses :func:`known_bound`), ``tol``, ...
 
+    Memory and time
+    ---------------
+    Checked against the budget of :mod:`optkin.limits` before anything is allocated
+    (:class:`MechanismError` naming the option and its largest allowed value):
+    ``width`` costs about 200 + 160 nx bytes per column (nx unknowns; measured 285 bytes
+    for a 3-RPR, 1.1 KB for a Stewart-Gough platform) and is at most :data:`MAX_WIDTH`;
+    ``starts`` about 6000 + 400 nx bytes per start, since on a continuum of configurations
+    every start becomes a solution of its own (its column, KinResult and JSON: 1.7 KB +
+    4.7 KB measured for a five-bar); ``rescue`` keeps 4 stalled starts per rescue,
+    200 + 8 nx bytes each. ``time_limit`` (also for the IPOPT rescues) may not exceed the
+    time budget; ``max_iter`` is at most :data:`optkin.limits.MAX_ITERATIONS`, ``threads``
+    at most :data:`optkin.limits.MAX_THREADS`.
+
     Returns
     -------
     SolutionSet
@@ -525,7 +768,11 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         4.6 / n, the rule of three at 99 %, when N1 = 0: a mode whose basin holds a share
         p >= 4.6 / n of the starts is missed by all n with probability <= 1 %),
         ``estimated_total`` (Chao1), ``bound`` and ``complete`` (True when the count reached
-        the known bound), ``stop_reason``, ``time`` and ``setup_time`` (compilation).
+        the known bound), ``stop_reason``, ``time`` and ``setup_time`` (compilation);
+        ``success``, ``status`` and ``message`` (also at the top level of ``to_dict()``):
+        no mode found is ``success=False``, status ``"infeasible"`` (``"iteration_limit"``
+        when the time limit stopped the search), and the message says that no closed
+        configuration exists for these actuated values.
 
     Examples
     --------
@@ -536,40 +783,56 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     (2, True)
     """
     opts = merge_options(ASSEMBLY_DEFAULTS, options, "assembly_modes")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise MechanismError(f"assembly_modes: seed must be an integer >= 0, got {seed!r}")
+    check_mechanism(mech, "assembly_modes")
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (numbers.Integral, float)):
+        raise MechanismError(f"assembly_modes: seed must be an integer >= 0, got {show(seed)}")
+    try:
+        seed = as_int(seed, "assembly_modes: seed", lo=0)
+    except MechanismError:
+        raise MechanismError(f"assembly_modes: seed must be an integer >= 0, got "
+                             f"{show(seed)}") from None
     model = get_model(mech)
-    qa = check_qa(model, qa)
+    _check_size_of(model, "assembly_modes")
+    qa = _qa_arg(model, qa)
+    o = _assembly_options(opts, model)
     t_start = timer()
-    tol = float(opts["tol"])
+    tol = o["tol"]
     nx = model.nx
-    bound = known_bound(mech) if opts["bound"] == "auto" else opts["bound"]
-    bound = None if bound is None else int(bound)
+    bound = known_bound(mech) if o["bound"] == "auto" else o["bound"]
     small = nx < 6
-    width = opts["width"]
+    width = o["width"]
     if width == "auto":
         width = 64 if small else 256
-    width = int(width)
-    if width < 1 or width & (width - 1):
-        raise MechanismError(f"assembly_modes: option width must be a power of 2 or 'auto', got {width}")
-    jit = opts["jit"]
+    jit = o["jit"]
     if jit == "auto":
         jit = "cached" if small else True
-    threads = 1 if small else int(opts["threads"])
+    threads = 1 if small else min(o["threads"], width)
     unroll = 3 if small else 2  # Newton iterations per call: fewer Python round trips
-    budget = int(opts["starts"])
-    min_starts = (256 if small else 2048) if opts["min_starts"] == "auto" \
-        else int(opts["min_starts"])
-    target = float(opts["target"])
-    target_upper = float(opts["target_upper"])
-    time_limit = float(opts["time_limit"])
-    max_iter = int(opts["max_iter"])
-    dedup = float(opts["dedup_tol"])
+    budget = o["starts"]
+    min_starts = (256 if small else 2048) if o["min_starts"] == "auto" else o["min_starts"]
+    target = o["target"]
+    target_upper = o["target_upper"]
+    time_limit = o["time_limit"]
+    max_iter = o["max_iter"]
+    dedup = o["dedup_tol"]
+    n_rescue = o["rescue"]
+    # memory, before anything is allocated: the pool of columns, then every start (each
+    # may become a solution of its own, as on a continuum of configurations), then the
+    # stalled starts kept for the rescues
+    per_col, per_start, per_stalled = _assembly_costs(model)
+    check_sizes(
+        "assembly_modes",
+        ("width", width, per_col, {"hi": MAX_WIDTH, "fit": floor_pow2,
+                                   "unit": "one column of the pool"}),
+        ("starts", budget, per_start, {"unit": "one start, which may become a solution"}),
+        ("rescue", n_rescue, per_stalled * _STALLED_PER_RESCUE,
+         {"lo": 0, "unit": f"{_STALLED_PER_RESCUE} stalled starts kept per rescue"}))
 
     starts = _Starts(model, qa, int(seed), width)
     info: dict[str, Any] = {"bound": bound, "width": width}
     if starts.empty_reason is not None:
-        info.update({"success": False, "message": starts.empty_reason, "starts": 0,
+        info.update({"success": False, "status": "infeasible",
+                     "message": _NO_MODE + starts.empty_reason, "starts": 0,
                      "converged": 0, "hits": [], "p_new": 0.0, "p_new_upper": 0.0,
                      "singletons": 0,
                      "doubletons": 0, "estimated_total": 0.0, "complete": True,
@@ -577,7 +840,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
                      "setup_time": 0.0, "rescued": 0, "jit": False})
         return SolutionSet([], "assembly modes", info, seed=int(seed))
 
-    step_max = opts["step_max"]
+    step_max = o["step_max"]
     if step_max == "auto":
         step_max = 1.0 if small else 0.3
     fmap, setup, compiled = _mapped_step(model, width, float(step_max), unroll, jit, threads)
@@ -588,7 +851,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     live = np.zeros(width, dtype=bool)
     live[:issued] = True
     it = np.zeros(width, dtype=int)
-    sols = np.zeros((nx, 0))
+    sols = _Columns(nx)
     hits: list[int] = []
     first_nit: list[int] = []
     done = converged = 0
@@ -597,12 +860,11 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     excluded = 0
     excl_res = 1e-5 * max(1.0, model.length)
     excl_dist = 1e-3
-    radius = np.zeros(0)
+    nn = np.zeros(0)  # distance of each solution to its nearest other solution
     # a start still far from closing after half its iterations is given up (it would most
     # likely wander until max_iter): Newton converges in a few steps once |Phi| is small
     stall_iter, stall_res = max_iter // 2, 1e-3 * max(1.0, model.length)
-    stalled_x: list[np.ndarray] = []
-    stalled_r: list[float] = []
+    stalled = _Stalled(_STALLED_PER_RESCUE * n_rescue)
     big = 1e3 * model.x_scale[:, None]
     stop = None
     while True:
@@ -616,15 +878,11 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         # exclusion: a start already inside the quadratic-convergence region of a known
         # solution is counted as a hit of it without iterating to round-off
         near = live & ~conv & finite & (r <= excl_res)
-        if near.any() and sols.shape[1]:
+        if near.any() and sols.n:
             jn = np.flatnonzero(near)
-            Dn = _scaled_dist(model, _canon(model, Xn[:, jn]), sols)
-            kn = np.argmin(Dn, axis=1)
-            if radius.size != sols.shape[1]:  # per solution: 1e-3, or a quarter of the
-                Ds = _scaled_dist(model, sols, sols)  # distance to its nearest neighbour
-                np.fill_diagonal(Ds, np.inf)
-                radius = np.minimum(excl_dist, 0.25 * Ds.min(axis=1))
-            inside = Dn[np.arange(jn.size), kn] < radius[kn]
+            kn, dn = _nearest(model, _canon(model, Xn[:, jn]), sols.view())
+            radius = np.minimum(excl_dist, 0.25 * nn)  # per solution: 1e-3, or a quarter
+            inside = dn < radius[kn]  # of the distance to its nearest neighbour
             for k in kn[inside]:
                 hits[k] += 1
                 n_once -= hits[k] == 2
@@ -639,10 +897,9 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         if conv.any():
             idx = np.flatnonzero(conv)
             C = _canon(model, Xn[:, idx])
-            D = _scaled_dist(model, C, sols)
-            if D.shape[1]:
-                kmin = np.argmin(D, axis=1)
-                known = D[np.arange(idx.size), kmin] < dedup
+            if sols.n:
+                kmin, dmin = _nearest(model, C, sols.view())
+                known = dmin < dedup
                 for k in kmin[known]:
                     hits[k] += 1
                     n_once -= hits[k] == 2
@@ -651,24 +908,25 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             unk = np.flatnonzero(~known)
             if unk.size:  # new solutions, clustered among themselves
                 Cu = C[:, unk]
-                Du = _scaled_dist(model, Cu, Cu)
                 rep = np.full(unk.size, -1)
+                s_before = sols.n
                 for j in range(unk.size):
                     if rep[j] >= 0:
                         continue
-                    same = (Du[j] < dedup) & (rep < 0)
+                    rest = np.flatnonzero(rep < 0)
+                    same = rest[_scaled_dist(model, Cu[:, rest], Cu[:, j:j + 1])[:, 0] < dedup]
                     rep[same] = j
-                    sols = np.hstack([sols, Cu[:, j:j + 1]])
-                    cnt = int(same.sum())
+                    sols.append(Cu[:, j])
+                    cnt = int(same.size)
                     hits.append(cnt)
                     n_once += cnt == 1
                     first_nit.append(int(it[idx[unk[j]]]))
+                nn = _nn_update(model, sols.view(), s_before, nn)
             converged += idx.size
         if bad.any():
             for col in np.flatnonzero(bad):
                 if np.isfinite(r[col]) and finite[col]:
-                    stalled_x.append(Xn[:, col].copy())
-                    stalled_r.append(float(r[col]))
+                    stalled.add(float(r[col]), Xn[:, col])
         fin = conv | bad
         if excluded_now is not None:
             fin |= excluded_now
@@ -706,20 +964,22 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             break
     t_newton = timer() - t0
 
-    # IPOPT rescues of stalled starts (best residuals first, away from known solutions)
+    # IPOPT rescues of stalled starts (best residuals first, away from known solutions),
+    # within the time limit too
     rescued = 0
-    n_rescue = int(opts["rescue"])
-    if stop != "bound" and n_rescue > 0 and stalled_x:
-        order = np.argsort(stalled_r)
-        cand = np.array(stalled_x)[order].T
-        cand = cand[:, np.array(stalled_r)[order] < 0.1 * max(1.0, model.length)]
+    stalled_r, cand = stalled.best()
+    if stop != "bound" and n_rescue > 0 and cand.shape[1]:
+        cand = cand[:, stalled_r < 0.1 * max(1.0, model.length)]
         tried = 0
         solver = model.nlp() if cand.shape[1] else None
         for j in range(cand.shape[1]):
             if tried >= n_rescue or (bound is not None and len(hits) >= bound):
                 break
+            if timer() - t0 > time_limit:
+                stop = "time_limit"
+                break
             x0 = cand[:, j]
-            if sols.shape[1] and _scaled_dist(model, _canon(model, x0[:, None]), sols).min() < 1e-3:
+            if sols.n and _nearest(model, _canon(model, x0[:, None]), sols.view())[1][0] < 1e-3:
                 continue
             tried += 1
             sol = solver(x0=x0, p=np.concatenate([qa, x0]), lbg=0, ubg=0)
@@ -727,15 +987,16 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             if not ok:
                 continue
             c1 = _canon(model, x1[:, None])
-            d = _scaled_dist(model, c1, sols)
-            if d.size and d.min() < dedup:
-                hits[int(np.argmin(d))] += 1
+            kk, d = _nearest(model, c1, sols.view())
+            if sols.n and d[0] < dedup:
+                hits[int(kk[0])] += 1
             else:
-                sols = np.hstack([sols, c1])
+                sols.append(c1[:, 0])
                 hits.append(1)
                 first_nit.append(max_iter)
                 rescued += 1
             converged += 1
+    sols = sols.view()
 
     # results, sorted by x
     order = sorted(range(len(hits)), key=lambda k: tuple(np.round(sols[:, k] / model.x_scale, 9)))
@@ -758,8 +1019,18 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
               f"Good-Turing probability that a further start finds a new one: {gt['p_new']:.2g}"
               f" (99 % upper bound {gt['p_new_upper']:.2g})")
            + f"; stopped by {stop}")
+    success = bool(out) and all(s.success for s in out)
+    if not out:
+        status = "iteration_limit" if stop == "time_limit" else "infeasible"
+        tried = f"none of {done} starts closed the loops (stopped by {stop})"
+        msg = (_NO_MODE + tried if stop != "time_limit" else
+               "no closed configuration found for these actuated values within the time "
+               f"limit: {tried}")
+    else:
+        status = "optimal" if success else "inaccurate"
     info.update({
-        "success": bool(out) and all(s.success for s in out),
+        "success": success,
+        "status": status,
         "message": msg,
         "starts": done,
         "issued": issued,
@@ -851,6 +1122,34 @@ def _corrector(model: Model, qa: np.ndarray, x: np.ndarray, tol: float, max_iter
     return x, False, max_iter, None, None
 
 
+#: Smallest ``min_step`` of :func:`track` (a fraction of one segment: below it the
+#: sub-steps no longer move s in floating point within any sensible time).
+MIN_STEP = 1e-12
+# Measured memory of track per path point (its KinResult, det and cond, its row of the
+# path): a + b * (number of joints) bytes; limits.SAFETY on top.
+_COST_POINT = (6000.0, 150.0)
+
+
+def _track_cost(model: Model) -> float:
+    a, b = _COST_POINT
+    return a + b * (len(model.mech.joint_names) + model.nx)
+
+
+def _path_arg(model: Model, path: Any, where: str) -> np.ndarray:
+    """Rows of active joint values (N, na) from any input, else a MechanismError."""
+    na = model.na
+    try:
+        P = as_matrix(path, where)
+    except MechanismError:
+        P = as_vector(path, where)  # not numbers, not finite, 3-D: its own message
+        P = P[:, None] if na == 1 else P
+    if P.ndim != 2 or P.shape[1] != na or P.shape[0] < 1:
+        raise MechanismError(
+            f"{where}: expected an array of shape (N, {na}) (one row of "
+            f"{list(model.mech.active_names)} per path point), got shape {P.shape}")
+    return P
+
+
 def _tangent(Wp: np.ndarray, Wa: np.ndarray, dq: np.ndarray) -> np.ndarray:
     """dx = -W_p^-1 W_a dq_a ([7.49]); least squares when W_p is not square."""
     try:
@@ -884,7 +1183,13 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
         Selects the assembly mode at ``qa_path[0]``: a :class:`KinResult` (e.g. one of
         :func:`assembly_modes`), x, all joints, or (platforms) a pose; None: the home.
     **options
-        See :data:`TRACK_DEFAULTS`.
+        See :data:`TRACK_DEFAULTS`. ``min_step`` is at least :data:`MIN_STEP`, ``max_iter``
+        at most :data:`optkin.limits.MAX_ITERATIONS`.
+
+    Memory and time: each path point costs about 6000 + 150 (nq + nx) bytes (its
+    KinResult and JSON; 6.2 KB measured for a five-bar), checked against the memory budget
+    of :mod:`optkin.limits` before tracking (``len(qa_path)``). When the time budget runs
+    out, the path stops there with status ``"iteration_limit"``.
 
     Returns
     -------
@@ -909,27 +1214,23 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
     ('optimal', 11)
     """
     opts = merge_options(TRACK_DEFAULTS, options, "track")
+    check_mechanism(mech, "track")
     model = get_model(mech)
-    try:
-        P = np.asarray(qa_path, dtype=float)
-    except (TypeError, ValueError):
-        raise MechanismError(f"qa_path: expected an array of shape (N, {model.na})") from None
-    if P.ndim == 1 and model.na == 1:
-        P = P[:, None]
-    if P.ndim != 2 or P.shape[1] != model.na or P.shape[0] < 1:
-        raise MechanismError(
-            f"qa_path: expected an array of shape (N, {model.na}) (one row of "
-            f"{list(mech.active_names)} per path point), got shape {P.shape}"
-        )
+    P = _path_arg(model, qa_path, "qa_path")
+    check_size("track", "len(qa_path)", P.shape[0], _track_cost(model),
+               unit="one path point and its KinResult")
     for k in range(P.shape[0]):
         check_qa(model, P[k])
-    tol = float(opts["tol"])
-    max_iter = int(opts["max_iter"])
-    min_step = float(opts["min_step"])
-    cond_max = float(opts["cond_max"])
-    cond_near = float(opts["cond_near"])
-    max_move = float(opts["max_correction"])
-    contraction = float(opts["contraction"])
+    guess = _guess_arg(guess)
+    w = "track"
+    tol = _opt_float(opts, "tol", w, positive=True)
+    max_iter = _opt_int(opts, "max_iter", w, lo=1)
+    min_step = _opt_float(opts, "min_step", w, lo=MIN_STEP, hi=1.0)
+    cond_max = _opt_float(opts, "cond_max", w)
+    cond_near = _opt_float(opts, "cond_near", w)
+    max_move = _opt_float(opts, "max_correction", w, positive=True)
+    contraction = _opt_float(opts, "contraction", w)
+    deadline = Deadline()
     scale = model.x_scale
     t0 = timer()
     x0 = parse_guess(model, P[0], guess)
@@ -971,6 +1272,12 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
         seg_len = float(np.linalg.norm(dqa)) or 1.0
         h = 1.0
         while s < 1.0:
+            if deadline.expired():
+                stopped, s_stop, qa_stop = k, s, qa_prev + s * dqa
+                status, msg = "iteration_limit", deadline.message("track") + (
+                    f": stopped at s = {s:.4f} of the segment from qa_path[{k - 1}] to "
+                    f"qa_path[{k}]")
+                break
             h = min(h, 1.0 - s)
             # det W_p extrapolated along the path (secant slope of the last accepted steps):
             # a predicted sign change within the step means a singularity ahead, approached
@@ -1161,6 +1468,10 @@ def working_modes(mech: Mechanism, pose: Any = None) -> WorkingModes:
     if pose is not None:
         from .inverse import inverse
 
+        pose = _guess_arg(pose, "pose")
+        if isinstance(pose, KinResult):
+            raise MechanismError("pose: expected a 4x4 pose or task coordinates, got a "
+                                 "KinResult (use its .pose)")
         sols = inverse(mech, pose)
         wm.pose = np.asarray(pose, dtype=float)
         wm.existing = {}
