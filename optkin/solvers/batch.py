@@ -39,12 +39,14 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import as_float, as_int, as_matrix, as_vector
 from ..errors import MechanismError
+from ..limits import MAX_ITERATIONS, MAX_THREADS, MAX_UNROLL, Deadline, check_sizes, show
 from ..mechanism import Mechanism
 from ..model import Model, get_model
 from ..model.compiled import FastFn
 from ..results import KinResult, SolverStats, _jsonable
-from .common import check_qa, make_result, merge_options, parse_guess, timer
+from .common import check_mechanism, check_qa, make_result, merge_options, parse_guess, timer
 from .forward import forward
 
 __all__ = ["forward_batch", "BatchResult", "BATCH_DEFAULTS"]
@@ -65,6 +67,20 @@ BATCH_DEFAULTS: dict[str, Any] = {
 
 #: Rows per call of the mapped guard Function (one compiled library per model).
 GUARD_CHUNK = 256
+#: Largest ``chunk`` (points per compiled call; one compiled library per value).
+MAX_CHUNK = 1 << 16
+# Measured memory (peak resident growth, VmHWM, of a fresh process): per row of QA, its
+# solution, residual, guard buffers and checks, and the lists of its to_dict, about
+# 300 + 100 (nx + na) bytes (750 bytes for a five-bar, both layouts); per column of a
+# compiled call, its buffers and the work of the mapped Function, 100 (nx + na) bytes
+# (314 bytes measured for a five-bar at chunk = 65536). limits.SAFETY is applied on top.
+_COST_ROW = (300.0, 100.0)
+_COST_CHUNK = 100.0
+
+
+def _row_cost(model: Model) -> float:
+    a, b = _COST_ROW
+    return a + b * (model.nx + model.na)
 #: Scaled distance below which the jump test never fires (round-off, repeated rows); it
 #: grows as 1 / conditioning below 1e-3, where x is ill-determined along the null direction.
 JUMP_FLOOR = 1e-7
@@ -182,24 +198,58 @@ class BatchResult:
 def _as_rows(model: Model, QA: Any) -> np.ndarray:
     na = model.na
     try:
-        A = np.array(QA, dtype=float)
-    except (TypeError, ValueError):
-        raise MechanismError(f"QA: expected an (n, {na}) array of active joint values") from None
-    if A.ndim == 1 and A.size == na:
-        A = A[None, :]
-    if A.ndim != 2 or na not in A.shape:
+        A = as_matrix(QA, "QA")
+    except MechanismError:
+        a = as_vector(QA, "QA")  # not numbers, not finite: its own message
+        if a.size != na:
+            raise MechanismError(
+                f"QA: expected an (n, {na}) array, one row of active joint values "
+                f"{list(model.mech.active_names)} per solve; got shape {a.shape}") from None
+        A = a[None, :]
+    if na not in A.shape:
         raise MechanismError(
             f"QA: expected an (n, {na}) array, one row of active joint values "
             f"{list(model.mech.active_names)} per solve; got shape {A.shape}"
         )
     if A.shape[1] != na:  # (na, n): columns
         A = A.T
-    if not np.all(np.isfinite(A)):
-        raise MechanismError("QA: has non-finite entries; give finite joint values")
     rho = [i for i, n in enumerate(model.mech.active_names) if n.endswith(".rho")]
     if rho and A.size and np.min(A[:, rho]) <= 0:
         raise MechanismError("QA: leg lengths (.rho columns) must be positive")
     return np.ascontiguousarray(A)
+
+
+def _bool_opt(opts: dict[str, Any], key: str) -> bool:
+    v = opts[key]
+    if isinstance(v, (bool, np.bool_)) or (isinstance(v, (int, np.integer)) and v in (0, 1)):
+        return bool(v)
+    raise MechanismError(f"forward_batch: option {key} must be True or False, got "
+                         f"{show(v)}")
+
+
+def _batch_options(opts: dict[str, Any]) -> dict[str, Any]:
+    w = "forward_batch"
+    o = {k: _bool_opt(opts, k) for k in ("path", "fallback", "guard")}
+    o["tol"] = as_float(opts["tol"], f"{w}: option tol", lo=0.0)
+    if not o["tol"] > 0:
+        raise MechanismError(f"{w}: option tol must be a number > 0, got {o['tol']:g}")
+    o["chunk"] = max(1, as_int(opts["chunk"], f"{w}: option chunk", lo=0))
+    o["iters"] = as_int(opts["iters"], f"{w}: option iters", lo=0, hi=MAX_UNROLL)
+    o["max_iter"] = as_int(opts["max_iter"], f"{w}: option max_iter", lo=0, hi=MAX_ITERATIONS)
+    o["threads"] = max(1, as_int(opts["threads"], f"{w}: option threads", lo=0,
+                                 hi=MAX_THREADS))
+    o["jump"] = as_float(opts["jump"], f"{w}: option jump", lo=0.0)
+    o["near"] = as_float(opts["near"], f"{w}: option near", lo=0.0)
+    return o
+
+
+def _guess_arg(guess: Any) -> Any:
+    if guess is None or isinstance(guess, KinResult):
+        return guess
+    try:
+        return as_matrix(guess, "guess")
+    except MechanismError:
+        return as_vector(guess, "guess")
 
 
 def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -> BatchResult:
@@ -216,7 +266,18 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
         KinResult, x, q, a pose...). ``path=False``: the same for every row, or an (n, nx)
         array of unknowns, one row per solve.
     **options
-        See :data:`BATCH_DEFAULTS`.
+        See :data:`BATCH_DEFAULTS`. ``chunk`` is at most :data:`MAX_CHUNK`, ``iters`` (Newton
+        steps unrolled into the compiled tracker) at most
+        :data:`optkin.limits.MAX_UNROLL`, ``max_iter`` at most
+        :data:`optkin.limits.MAX_ITERATIONS`, ``threads`` at most
+        :data:`optkin.limits.MAX_THREADS`.
+
+    Memory and time: each row of ``QA`` costs about 300 + 100 (nx + na) bytes (solution,
+    checks and JSON; 750 bytes measured for a five-bar) and each column of a compiled call
+    (``chunk``) about 100 (nx + na) bytes; both are checked against the memory budget of
+    :mod:`optkin.limits` before solving. When the time budget runs out the rows not yet
+    solved stay NaN, the status is ``"iteration_limit"`` and ``stats.extra["stopped_at"]``
+    is the first of them.
 
     Returns
     -------
@@ -234,21 +295,31 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
     (True, (50, 2))
     """
     opts = merge_options(BATCH_DEFAULTS, options, "forward_batch")
+    check_mechanism(mech, "forward_batch")
+    o = _batch_options(opts)
     model = get_model(mech)
     A = _as_rows(model, QA)
-    tol = float(opts["tol"])
-    chunk = max(1, int(opts["chunk"]))
-    path = bool(opts["path"])
-    guard = (path, float(opts["jump"]), float(opts["near"])) if opts["guard"] else None
+    nx, na = model.nx, model.na
+    chunk = o["chunk"]
+    check_sizes(
+        "forward_batch",
+        ("chunk", chunk, _COST_CHUNK * (nx + na),
+         {"hi": MAX_CHUNK, "unit": "one column of a compiled call"}),
+        ("len(QA)", A.shape[0], _row_cost(model),
+         {"lo": 0, "unit": "one row: its solution, checks and JSON"}))
+    guess = _guess_arg(guess)
+    tol = o["tol"]
+    path = o["path"]
+    guard = (path, o["jump"], o["near"]) if o["guard"] else None
     gchunk = GUARD_CHUNK if guard else None
+    deadline = Deadline()
     if path:
         # the libraries (core, tracker, guard) are compiled in parallel
-        model.compile(tracker=(chunk, int(opts["iters"])), guard=gchunk)
-        return _track(model, A, guess, tol, chunk, int(opts["iters"]), bool(opts["fallback"]),
-                      guard)
+        model.compile(tracker=(chunk, o["iters"]), guard=gchunk)
+        return _track(model, A, guess, tol, chunk, o["iters"], o["fallback"], guard, deadline)
     model.compile(guard=gchunk)
-    return _independent(model, A, guess, tol, chunk, int(opts["max_iter"]),
-                        max(1, int(opts["threads"])), bool(opts["fallback"]), guard)
+    return _independent(model, A, guess, tol, chunk, o["max_iter"], o["threads"],
+                        o["fallback"], guard, deadline)
 
 
 def _checks(model: Model, A, X, ok, path: bool, jump: float, near: float):
@@ -309,7 +380,8 @@ def _checks(model: Model, A, X, ok, path: bool, jump: float, near: float):
     return sign, cond, crossed, near_s, prev, why, ratio, det
 
 
-def _finish(model: Model, A, X, R, nit, tol, solver, t0, extra, guard=None) -> BatchResult:
+def _finish(model: Model, A, X, R, nit, tol, solver, t0, extra, guard=None,
+            stopped: tuple[int, str] | None = None) -> BatchResult:
     ok = np.isfinite(R) & (R <= tol)
     n = A.shape[0]
     nbad = int(n - ok.sum())
@@ -372,12 +444,17 @@ def _finish(model: Model, A, X, R, nit, tol, solver, t0, extra, guard=None) -> B
         if events:
             msg = ". ".join(t for _, t in sorted(events)) + ". " + msg
             status = "singular"
+    if stopped is not None:  # the time budget ran out: the rows from stopped[0] on
+        msg = f"{stopped[1]} (rows from {stopped[0]} on were not solved). {msg}"
+        status = "iteration_limit"
+        extra["stopped_at"] = stopped[0]
     stats = SolverStats(solver, 0.0, timer() - t0, int(nit.sum()), status, extra)
     return BatchResult(X, A, ok, R, nit, status, msg, stats, tuple(model.x_names), model,
                        sign, cond, crossed, near_s)
 
 
-def _track(model: Model, A, guess, tol, chunk, iters, fallback, guard=None) -> BatchResult:
+def _track(model: Model, A, guess, tol, chunk, iters, fallback, guard=None,
+           deadline: Deadline | None = None) -> BatchResult:
     t0 = timer()
     n, na, nx = A.shape[0], model.na, model.nx
     X = np.full((n, nx), np.nan)
@@ -396,7 +473,11 @@ def _track(model: Model, A, guess, tol, chunk, iters, fallback, guard=None) -> B
     junk = np.empty((chunk, na))
     i, calls, nfall = 1, 0, 0
     anchored = bool(first.success)
+    stopped = None
     while i < n:
+        if deadline is not None and deadline.expired():
+            stopped = (i, deadline.message("forward_batch"))
+            break
         if not anchored:
             # no closed configuration to continue from yet (e.g. the path starts out of
             # reach): solve rows one by one from the caller's guess until one closes
@@ -434,11 +515,11 @@ def _track(model: Model, A, guess, tol, chunk, iters, fallback, guard=None) -> B
     extra = {"compiled": compiled, "fallback": nfall, "chunks": calls, "chunk": chunk,
              "iters": iters, "path": True}
     return _finish(model, A, X, R, nit, tol, "compiled-track" if compiled else "track", t0,
-                   extra, guard)
+                   extra, guard, stopped)
 
 
 def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback,
-                 guard=None) -> BatchResult:
+                 guard=None, deadline: Deadline | None = None) -> BatchResult:
     t0 = timer()
     n, nx = A.shape[0], model.nx
     g = None if guess is None or isinstance(guess, KinResult) else np.asarray(guess, dtype=float)
@@ -460,7 +541,12 @@ def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback
     Xn = np.empty((chunk, nx))
     Rc = np.empty(chunk)
     calls = 0
+    stopped = None
     for s in range(0, n, chunk):
+        if deadline is not None and deadline.expired():
+            stopped = (s, deadline.message("forward_batch"))
+            X[s:] = np.nan
+            break
         k = min(chunk, n - s)
         Qc[:k] = A[s:s + k]
         Qc[k:] = A[s + k - 1]
@@ -490,6 +576,11 @@ def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback
     nfall = 0
     if fallback:
         for i in np.flatnonzero(~(np.isfinite(R) & (R <= tol))):
+            if stopped is not None and i >= stopped[0]:
+                break
+            if deadline is not None and deadline.expired():
+                stopped = (int(i), deadline.message("forward_batch"))
+                break
             r = forward(model.mech, A[i], guess=X0[i], tol=tol)
             nfall += 1
             X[i], R[i], nit[i] = r.x, r.residual, nit[i] + r.nit
@@ -497,4 +588,4 @@ def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback
     extra = {"compiled": compiled, "fallback": nfall, "chunks": calls, "chunk": chunk,
              "threads": threads, "path": False}
     return _finish(model, A, X, R, nit, tol, "compiled-newton" if compiled else "newton", t0,
-                   extra, guard)
+                   extra, guard, stopped)
