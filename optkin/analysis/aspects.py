@@ -30,17 +30,23 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import as_float
 from ..errors import MechanismError
+from ..limits import SAFETY, check_size, show
 from ..mechanism import Mechanism
 from ..model import get_model
 from .continuation import (
     DEFAULT_STEP,
     SingularCurves,
+    _check_mech_size,
     _full_from_x,
+    _mapping_arg,
+    _pair_arg,
+    _point_cost,
+    _singular_curves,
     _split_wrapped,
     augmented_system,
     check_number,
-    singular_curves,
 )
 from .planar import Face, faces
 
@@ -302,7 +308,8 @@ def _check_plane(mech: Mechanism, fixed: Mapping[str, float] | None):
             f"{mech.name}: aspects and workspaces are computed for planar leg mechanisms "
             "(2-DoF point platforms, or 3-DoF platforms at a fixed orientation phi)")
     model = get_model(mech)
-    fixed = dict(fixed or {})
+    _check_mech_size(model)
+    fixed = _mapping_arg(fixed, "fixed")
     if mech.platform == "planar" and set(fixed) != {"phi"}:
         raise MechanismError(
             f"{mech.name}: a 3-DoF platform needs a section at fixed orientation: "
@@ -310,23 +317,17 @@ def _check_plane(mech: Mechanism, fixed: Mapping[str, float] | None):
     if mech.platform == "planar_point" and fixed:
         raise MechanismError(f"{mech.name}: a 2-DoF point platform takes no fixed coordinates")
     names = tuple(mech.active_names) + tuple(model.x_names)
+    fixed = {k: as_float(v, f"fixed[{show(k)}]") for k, v in fixed.items()}
     return fixed, names
 
 
 def _limit_map(mech, names, limits):
     out = {}
-    for k, pair in dict(limits or {}).items():
-        if k not in names[: get_model(mech).na]:
-            raise MechanismError(f"limits: {k!r} is not an actuated joint of {mech.name}; "
-                                 f"known: {', '.join(mech.active_names)}")
-        try:
-            lo, hi = (float(v) for v in pair)
-        except (TypeError, ValueError):
-            lo = hi = float("nan")
-        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-            raise MechanismError(f"limits[{k!r}]: expected a pair (lo, hi) of finite numbers with "
-                                 f"lo < hi, got {pair!r}")
-        out[names.index(k)] = (lo, hi)
+    for k, pair in _mapping_arg(limits, "limits").items():
+        if not isinstance(k, str) or k not in names[: get_model(mech).na]:
+            raise MechanismError(f"limits: {show(k)} is not an actuated joint of "
+                                 f"{mech.name}; known: {', '.join(mech.active_names)}")
+        out[names.index(k)] = _pair_arg(pair, f"limits[{k!r}]")
     return out
 
 
@@ -383,6 +384,16 @@ def aspects(
         ``aspects`` (each with working_mode, det_sign, face = WA polygon, area, v, qa_mask,
         qa_area), ``counts`` per working mode, the traced ``curves``, success/status/message.
 
+    Memory and time
+    ---------------
+    Checked against the budget of :mod:`optkin.limits` before anything is allocated:
+    ``qa_grid``^2 mask cells of about 400 bytes plus one byte per mask (223 bytes measured
+    for a five-bar), then the seeding chart of :func:`singular_curves` (``grid``^2 points),
+    then every traced point at about 2.1 KB plus 60 nv bytes (the curves and the planar
+    arrangements of the regions; 2.1 KB measured for a five-bar). When the curves stop
+    at a budget (status ``"memory_budget"`` or ``"time_limit"``) no aspects are returned
+    and ``success`` is False.
+
     Examples
     --------
     >>> import optkin
@@ -394,16 +405,24 @@ def aspects(
     """
     t0 = time.perf_counter()
     fixed, names = _check_plane(mech, fixed)
-    check_number("qa_grid", qa_grid, integer=True, low=2)
+    qa_grid = check_number("qa_grid", qa_grid, integer=True, low=2)
     lim_map = _limit_map(mech, names, limits)
     model = get_model(mech)
+    qa_cost = _qa_grid_cost(mech, "aspects", qa_grid)
     kinds = ["parallel", "serial"] + (["limit"] if lim_map else [])
-    curves = singular_curves(mech, plane="workspace", kind=kinds, fixed=fixed, bounds=bounds,
-                             grid=grid, step=step, limits=limits, cusps=False)
+    curves = _singular_curves(mech, "workspace", kinds, fixed, bounds, grid, limits, step,
+                              1e-11, None, False, None, "aspects", _region_cost(model),
+                              qa_cost)
+    modes = leg_working_modes(mech)
+    if curves.status in _STOPPED:  # incomplete curves bound no regions
+        return Aspects(mechanism=mech.name, working_modes=modes, aspects=[], curves=curves,
+                       plane=curves.plane, qa_names=tuple(mech.active_names), qa_grid=None,
+                       success=False, status=curves.status,
+                       message=f"no aspects: {curves.message}",
+                       time=time.perf_counter() - t0, workspace_area={})
     pidx = curves.info["plane_index"]
     fixed_map = {names.index(k): float(v) for k, v in fixed.items()}
     snap = 3.0 * float(step or DEFAULT_STEP) * model.length
-    modes = leg_working_modes(mech)
     out: list[Aspect] = []
     wareas = {}
     for mode in modes:
@@ -420,9 +439,10 @@ def aspects(
     counts = {m: sum(a.working_mode == m for a in out) for m in modes}
     msg = (f"{len(modes)} working mode(s), aspects per mode "
            f"{[counts[m] for m in modes]}; curves: {curves.message}")
+    status = "ok" if ok else _failed_status(curves)
     return Aspects(mechanism=mech.name, working_modes=modes, aspects=out, curves=curves,
                    plane=curves.plane, qa_names=tuple(mech.active_names), qa_grid=qgrid,
-                   success=bool(ok), status="ok" if ok else "inaccurate", message=msg,
+                   success=bool(ok), status=status, message=msg,
                    time=time.perf_counter() - t0, workspace_area=wareas)
 
 
@@ -576,6 +596,10 @@ def workspace(
         ``regions`` and ``areas`` per working mode, ``total`` (faces) and ``area`` of the
         union, success/status/message.
 
+    Memory and time: as for :func:`aspects` (``qa_grid``, ``grid`` and the traced points are
+    checked against the budget of :mod:`optkin.limits`; a budget that stops the curves
+    leaves no regions and ``success`` False).
+
     Examples
     --------
     Two annuli 3 <= r <= 13 about A and B, |AB| = 9 (exactly 245.1414):
@@ -586,19 +610,27 @@ def workspace(
     """
     t0 = time.perf_counter()
     fixed, names = _check_plane(mech, fixed)
-    check_number("qa_grid", qa_grid, integer=True, low=2)
+    qa_grid = check_number("qa_grid", qa_grid, integer=True, low=2)
     lim_map = _limit_map(mech, names, limits)
     model = get_model(mech)
+    qa_cost = _qa_grid_cost(mech, "workspace", qa_grid)
     kinds = ["serial"] + (["limit"] if lim_map else [])
     has_serial = any(leg.type == "RRR" for leg in mech.legs)
     if not has_serial and not lim_map:
         kinds = ["parallel"]  # only the box bounds the region; parallel curves unused
-    curves = singular_curves(mech, plane="workspace", kind=kinds, fixed=fixed, bounds=bounds,
-                             grid=grid, step=step, limits=limits, cusps=False)
+    curves = _singular_curves(mech, "workspace", kinds, fixed, bounds, grid, limits, step,
+                              1e-11, None, False, None, "workspace", _region_cost(model),
+                              qa_cost)
+    modes = leg_working_modes(mech)
+    if curves.status in _STOPPED:  # incomplete curves bound no regions
+        return Workspace(mechanism=mech.name, plane=curves.plane, working_modes=modes,
+                         regions={m: [] for m in modes}, areas={m: 0.0 for m in modes},
+                         total=[], area=0.0, curves=curves, success=False,
+                         status=curves.status, message=f"no workspace: {curves.message}",
+                         time=time.perf_counter() - t0, qa_names=tuple(mech.active_names))
     pidx = curves.info["plane_index"]
     fixed_map = {names.index(k): float(v) for k, v in fixed.items()}
     snap = 3.0 * float(step or DEFAULT_STEP) * model.length
-    modes = leg_working_modes(mech)
     regions, areas = {}, {}
     for mode in modes:
         reg = _region_faces(mech, curves, mode, curves.bounds, snap, pidx, fixed_map, lim_map,
@@ -609,10 +641,10 @@ def workspace(
     qmasks, qgrid = None, None
     if mech.platform == "planar_point" and len(mech.legs) == 2:
         qmasks, qgrid = _mode_qa_masks(mech, regions, qa_grid, lim_map)
-    ok = curves.success or not has_serial
+    ok = (curves.success or not has_serial) and curves.status not in _STOPPED
     return Workspace(mechanism=mech.name, plane=curves.plane, working_modes=modes,
                      regions=regions, areas=areas, total=total, area=area, curves=curves,
-                     success=bool(ok), status="ok" if ok else "inaccurate",
+                     success=bool(ok), status="ok" if ok else _failed_status(curves),
                      message=f"workspace area {area:.6g}; per mode "
                              f"{[round(areas[m], 6) for m in modes]}",
                      time=time.perf_counter() - t0, qa_masks=qmasks, qa_grid=qgrid,
@@ -644,6 +676,44 @@ def _mode_qa_masks(mech, regions, n, lim_map):
                 ins = f.contains(P[idx[sel]])
                 masks[m][idx[sel][ins]] = True
     return {m: v.reshape(n, n) for m, v in masks.items()}, (g0, g1)
+
+
+# ---------------------------------------------------------------------------------------
+# budgets
+# ---------------------------------------------------------------------------------------
+
+#: Statuses of curves stopped by a budget (time or memory): the regions are incomplete.
+_STOPPED = ("time_limit", "memory_budget")
+# Measured memory (peak resident growth, VmHWM, of a fresh process). Per traced point of
+# the curves, beyond what singular_curves keeps: the polylines cut per working mode and
+# the planar arrangement of each (segments, split lists, vertices, half-edges, faces):
+# _REGION_POINT bytes. Per cell of the joint-space masks (qa_grid^2 cells): the grid,
+# the closed-form direct kinematics of both assembly modes, the B labels, and a mask per
+# aspect or working mode: a + b * (number of masks) bytes.
+_REGION_POINT = 1500.0
+_COST_QA_CELL = (400.0, 1.0)
+#: Masks counted per working mode for the joint-space images (aspects per mode).
+_MASKS_PER_MODE = 8
+
+
+def _region_cost(model: Any) -> float:
+    """Bytes per traced point for aspects and workspace (curves and arrangements)."""
+    return _point_cost(model) + _REGION_POINT
+
+
+def _qa_grid_cost(mech: Mechanism, where: str, n: int) -> float:
+    """Check ``qa_grid`` against the memory budget; the bytes it reserves (with SAFETY)."""
+    if not (mech.platform == "planar_point" and len(mech.legs) == 2):
+        return 0.0  # no joint-space masks for this mechanism
+    a, b = _COST_QA_CELL
+    per = a + b * _MASKS_PER_MODE * len(leg_working_modes(mech))
+    check_size(where, "qa_grid", n, per, power=2, lo=2,
+               unit="one cell of the joint-space masks")
+    return SAFETY * per * n * n
+
+
+def _failed_status(curves: SingularCurves) -> str:
+    return curves.status if curves.status in _STOPPED else "inaccurate"
 
 
 # ---------------------------------------------------------------------------------------

@@ -27,16 +27,19 @@ Modern Robotics 7.3 (seed 001).
 from __future__ import annotations
 
 import itertools
+import numbers
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
+from .._checks import MAX_ABS, as_float, as_int, as_matrix, as_vector
 from ..errors import MechanismError
+from ..limits import SAFETY, Deadline, check_size, largest_size, memory_budget, show
 from ..mechanism import Mechanism
 from ..model import get_model
 
@@ -337,8 +340,10 @@ def _split_wrapped(P: np.ndarray, periodic: tuple[bool, bool]) -> list[np.ndarra
 
 class _Tracer:
     def __init__(self, sys: _System, pvals: np.ndarray, lim: float, plane_idx: tuple[int, int],
-                 bounds: np.ndarray, hmax: float, tol: float, max_steps: int) -> None:
+                 bounds: np.ndarray, hmax: float, tol: float, max_steps: int,
+                 budget: _Budget | None = None) -> None:
         self.sys = sys
+        self.budget = budget if budget is not None else _Budget()
         self.p = pvals
         self.lim = lim
         self.free = np.array(sys.free_idx)
@@ -454,7 +459,10 @@ class _Tracer:
         d_prev = self.aug_det(J, t)
         h = self.hmax * 0.25
         arc = 0.0
+        budget = self.budget
         for _ in range(self.max_steps):
+            if budget.exhausted():
+                return pts, budget.reason
             up = u + h * t
             un, nit = self.correct(up, t)
             if un is None:
@@ -489,6 +497,7 @@ class _Tracer:
                     pts.append(ub)
                 return pts, "boundary"
             pts.append(un)
+            budget.points += 1
             arc += step
             # closure
             if arc > 3 * h and np.linalg.norm(self.diff(un, u0)) < 1.2 * max(h, step):
@@ -617,6 +626,8 @@ def _trace_all(tr: _Tracer, seeds: list[np.ndarray], dedup: float) -> list[tuple
     done_bps = 0
     queue: list[tuple[np.ndarray, np.ndarray | None, int | None]] = [(s, None, None) for s in seeds]
     while queue or done_bps < len(tr.bps):
+        if tr.budget.exhausted():
+            break
         if not queue:
             ib = done_bps
             done_bps += 1
@@ -699,8 +710,9 @@ def _platform_points(mech: Mechanism, X: np.ndarray) -> list[np.ndarray]:
 
 
 def _full_from_x(mech: Mechanism, X: np.ndarray, fixed_leg: int | None = None,
-                 fixed_val: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Full points V (N, nv) and validity for every posture combination of the legs."""
+                 fixed_val: np.ndarray | None = None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Full points V (N, nv) and validity for every posture combination of the legs
+    (generated one combination at a time)."""
     Ps = _platform_points(mech, X)
     per_leg = []
     for k, leg in enumerate(mech.legs):
@@ -708,12 +720,10 @@ def _full_from_x(mech: Mechanism, X: np.ndarray, fixed_leg: int | None = None,
             per_leg.append([(fixed_val, np.ones(len(X), dtype=bool))])
         else:
             per_leg.append(_leg_ik(leg, Ps[k]))
-    out = []
-    for combo in itertools.product(*per_leg):
+    for combo in itertools.product(*per_leg):  # one at a time: memory of one combination
         Q = np.stack([c[0] for c in combo], 1)
         ok = np.logical_and.reduce([c[1] for c in combo])
-        out.append((np.hstack([Q, X]), ok))
-    return out
+        yield np.hstack([Q, X]), ok
 
 
 def _reach_box(mech: Mechanism) -> np.ndarray:
@@ -856,7 +866,8 @@ def _sign_change_seeds(sys: _System, V: np.ndarray, ok: np.ndarray, shape: tuple
     return out
 
 
-def _seeds_khalil(sys: _System, fixed: dict[int, float], n: int, rng: np.random.Generator) -> list[np.ndarray]:
+def _seeds_khalil(sys: _System, fixed: dict[int, float], n: int, rng: np.random.Generator,
+                  budget: _Budget | None = None) -> list[np.ndarray]:
     """C-space seeds of a chain with one free actuated joint: a grid over it, multi-start
     Newton (the model's damped step) on the unknowns x."""
     model = sys.model
@@ -870,6 +881,8 @@ def _seeds_khalil(sys: _System, fixed: dict[int, float], n: int, rng: np.random.
     for i, v in fixed.items():
         qa[i] = v
     for val in np.linspace(-np.pi, np.pi, n, endpoint=False):
+        if budget is not None and budget.exhausted():
+            break
         qa[free_qa[0]] = val
         for x0 in starts:
             x = x0.copy()
@@ -883,14 +896,18 @@ def _seeds_khalil(sys: _System, fixed: dict[int, float], n: int, rng: np.random.
     return seeds
 
 
-def _seeds_khalil_parallel(mech: Mechanism, names, n_lines: int, n: int, hmax: float) -> list[np.ndarray]:
+def _seeds_khalil_parallel(mech: Mechanism, names, n_lines: int, n: int, hmax: float,
+                           budget: _Budget | None = None) -> list[np.ndarray]:
     """Seeds of det W_p = 0 for a 2-DoF chain: along the 1-DoF sections q_a,0 = c (C-space
     curves traced by continuation), the points where det W_p changes sign."""
     seeds: list[np.ndarray] = []
     na = get_model(mech).na
     for c in np.linspace(-np.pi, np.pi, n_lines, endpoint=False):
-        sub = singular_curves(mech, plane=(names[1], names[na]), kind="closure",
-                              fixed={names[0]: float(c)}, grid=6, step=hmax, cusps=False)
+        if budget is not None and budget.exhausted():
+            break
+        sub = _singular_curves(mech, (names[1], names[na]), "closure", {names[0]: float(c)},
+                               None, 6, None, hmax, 1e-11, None, False, budget,
+                               "singular_curves")
         seeds += list(sub.info["actuator_singularities"])
     return seeds
 
@@ -903,13 +920,19 @@ def _seeds_khalil_parallel(mech: Mechanism, names, n_lines: int, n: int, hmax: f
 def _resolve_names(mech: Mechanism, sysnames: Sequence[str], items: Any, what: str) -> list[int]:
     out = []
     for it in items:
-        if isinstance(it, (int, np.integer)):
-            out.append(int(it))
-        elif it in sysnames:
+        if isinstance(it, numbers.Integral) and not isinstance(it, (bool, np.bool_)):
+            i = int(it)
+            if not 0 <= i < len(sysnames):
+                raise MechanismError(
+                    f"{what}: coordinate index {show(i)} is out of range (0 to "
+                    f"{len(sysnames) - 1}: {', '.join(sysnames)})")
+            out.append(i)
+        elif isinstance(it, str) and it in sysnames:
             out.append(sysnames.index(it))
         else:
             raise MechanismError(
-                f"{what}: unknown coordinate {it!r} of {mech.name}; known: {', '.join(sysnames)}"
+                f"{what}: unknown coordinate {show(it)} of {mech.name}; known: "
+                f"{', '.join(sysnames)}"
             )
     return out
 
@@ -933,17 +956,20 @@ def plane_indices(mech: Mechanism, plane: Any, fixed_idx: Sequence[int]) -> tupl
                 cand = [na + j for j in range(model.nx) if na + j not in fixed_idx]
         else:
             raise MechanismError(
-                f"plane: expected 'joint', 'workspace' or two coordinate names, got {plane!r}")
+                f"plane: expected 'joint', 'workspace' or two coordinate names, got {show(plane)}")
         if mech.kind == "khalil" and plane in ("joint", "joints", "qa", "joint_space") and len(cand) < 2:
             cand = cand + [i for i in range(na, na + model.nx) if i not in fixed_idx]
         if len(cand) < 2:
             raise MechanismError(
-                f"plane {plane!r} of {mech.name} has {len(cand)} free coordinate(s); name two "
+                f"plane {show(plane)} of {mech.name} has {len(cand)} free coordinate(s); name two "
                 f"coordinates, e.g. plane=({names[0]!r}, {names[-1]!r})")
         return cand[0], cand[1]
-    idx = _resolve_names(mech, names, plane, "plane")
-    if len(idx) != 2:
-        raise MechanismError(f"plane: expected two coordinates, got {plane!r}")
+    if not isinstance(plane, (Sequence, np.ndarray)) or len(plane) != 2:
+        raise MechanismError(f"plane: expected 'joint', 'workspace' or two coordinate names, "
+                             f"got {show(plane)}")
+    idx = _resolve_names(mech, names, list(plane), "plane")
+    if len(idx) != 2 or idx[0] == idx[1]:
+        raise MechanismError(f"plane: expected two coordinates, got {show(plane)}")
     return idx[0], idx[1]
 
 
@@ -957,7 +983,7 @@ def singular_curves(
     limits: Mapping[str, tuple[float, float]] | None = None,
     step: float | None = None,
     tol: float = 1e-11,
-    max_steps: int = 20000,
+    max_steps: int | None = None,
     cusps: bool | None = None,
 ) -> SingularCurves:
     """Trace the singular loci of a mechanism in a plane by pseudo-arclength continuation.
@@ -989,6 +1015,9 @@ def singular_curves(
         default :data:`DEFAULT_STEP`.
     tol : float
         Corrector tolerance on max |G|.
+    max_steps : int, optional
+        Largest number of continuation steps each way along one curve (default 20000,
+        lowered to what the memory budget allows when not given).
     cusps : bool, optional
         Detect cusps of the parallel curves in the plane (default: when the plane is the
         joint space of a section).
@@ -999,6 +1028,17 @@ def singular_curves(
         ``curves`` (ordered points with residuals), ``branch_points`` (full v) and
         ``cusps`` (full v; ``plane_points`` gives their plane coordinates),
         ``success``/``status``/``message``.
+
+    Memory and time
+    ---------------
+    Checked against the budget of :mod:`optkin.limits` before anything is allocated: the
+    seeding chart holds ``grid``^2 points, about 40 + 110 nv bytes each (nv = na + nx;
+    363 bytes measured for a five-bar, 634 for a 3-RPR section); every traced point costs
+    about 600 + 60 nv bytes (570 measured), and a given ``max_steps`` must leave room for
+    2 ``max_steps`` points. While tracing, the curves stop when the points would exceed
+    the budget (status ``"memory_budget"``) or when the time budget runs out (status
+    ``"time_limit"``); ``success`` is then False. ``step`` lies between
+    :data:`MIN_STEP` and :data:`MAX_STEP`.
 
     Examples
     --------
@@ -1011,30 +1051,57 @@ def singular_curves(
     >>> r.count, r.success, r.max_residual < 1e-9
     (3, True, True)
     """
+    return _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol,
+                            max_steps, cusps, None, "singular_curves")
+
+
+def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, max_steps,
+                     cusps, budget: _Budget | None, where: str,
+                     point_cost: float | None = None, reserved: float = 0.0) -> SingularCurves:
+    """singular_curves with a shared budget (``None``: a new one for this call, sized by
+    ``point_cost`` bytes per traced point, ``reserved`` bytes being spent elsewhere by the
+    caller; ``max_steps=None``: the default, lowered to what the budget allows)."""
     t0 = time.perf_counter()
     if not isinstance(mech, Mechanism):
         raise MechanismError(f"expected an optkin Mechanism, got {type(mech).__name__}")
-    check_number("grid", grid, integer=True, low=2, optional=True)
-    check_number("step", step, low=0.0, strict=True, optional=True)
-    check_number("tol", tol, low=0.0, strict=True)
-    check_number("max_steps", max_steps, integer=True, low=1)
+    grid = check_number("grid", grid, integer=True, low=2, optional=True)
+    step = check_number("step", step, low=0.0, strict=True, optional=True)
+    if step is not None and not MIN_STEP <= step <= MAX_STEP:
+        raise MechanismError(f"step: expected a number between {MIN_STEP:g} and {MAX_STEP:g} "
+                             f"(scaled units: lengths / mechanism size, radians), got {step:g}")
+    tol = check_number("tol", tol, low=0.0, strict=True)
+    user_steps = max_steps is not None
+    if user_steps:
+        max_steps = check_number("max_steps", max_steps, integer=True, low=1)
+    if isinstance(cusps, (np.bool_, numbers.Integral)) and not isinstance(cusps, bool) \
+            and cusps in (0, 1):
+        cusps = bool(cusps)
+    if cusps is not None and not isinstance(cusps, bool):
+        raise MechanismError(f"cusps: expected True, False or None, got {show(cusps)}")
     model = get_model(mech)
+    _check_mech_size(model)
     names = _names_of(mech)
-    fixed = dict(fixed or {})
+    fixed = _mapping_arg(fixed, "fixed")
     fixed_idx_l = _resolve_names(mech, names, list(fixed), "fixed")
-    fixed_map = {i: float(fixed[k]) for i, k in zip(fixed_idx_l, fixed)}
+    fixed_map = {i: as_float(fixed[k], f"fixed[{show(k)}]") for i, k in zip(fixed_idx_l, fixed)}
     fixed_idx = tuple(sorted(fixed_map))
     pidx = plane_indices(mech, plane, fixed_idx)
     if any(i in fixed_idx for i in pidx):
         raise MechanismError("plane: a plane coordinate cannot also be fixed")
-    kinds: list[str] = [kind] if isinstance(kind, str) else list(kind)
+    if isinstance(kind, str):
+        kinds: list[str] = [kind]
+    elif isinstance(kind, Sequence) and all(isinstance(k, str) for k in kind):
+        kinds = list(kind)
+    else:
+        raise MechanismError(f"kind: expected 'parallel', 'serial', 'limit', 'closure', 'all' "
+                             f"or a list of them, got {show(kind)}")
     if "all" in kinds:
         kinds = ["parallel", "serial", "limit"]
     if mech.kind == "khalil" and model.na == 1 and kinds == ["parallel"]:
         kinds = ["closure"]
     na = model.na
     conds: list[tuple[str, float]] = []
-    limits = dict(limits or {})
+    limits = _mapping_arg(limits, "limits")
     lim_idx = _resolve_names(mech, names, list(limits), "limits")
     for k in kinds:
         if k == "serial":
@@ -1046,14 +1113,14 @@ def singular_curves(
         elif k == "limit":
             for i, key in zip(lim_idx, limits):
                 if i >= na:
-                    raise MechanismError(f"limits: {key!r} is not an actuated joint")
-                lo, hi = limits[key]
-                conds += [(f"limit:{i}", float(lo)), (f"limit:{i}", float(hi))]
+                    raise MechanismError(f"limits: {show(key)} is not an actuated joint")
+                lo, hi = _pair_arg(limits[key], f"limits[{show(key)}]")
+                conds += [(f"limit:{i}", lo), (f"limit:{i}", hi)]
         elif k in ("parallel", "closure"):
             conds.append((k, 0.0))
         else:
             raise MechanismError(
-                f"kind: expected 'parallel', 'serial', 'limit', 'closure' or 'all', got {k!r}")
+                f"kind: expected 'parallel', 'serial', 'limit', 'closure' or 'all', got {show(k)}")
     if mech.kind == "legs" and (not mech.planar or any(leg.type not in ("RPR", "RRR") for leg in mech.legs)):
         raise MechanismError(
             f"{mech.name}: singular curves support planar RPR/RRR leg mechanisms and 1-DoF "
@@ -1077,14 +1144,23 @@ def singular_curves(
                 bx.append((0.0, 3.0 * model.length))
         bounds_arr = np.array(bx, dtype=float)
     else:
-        try:
-            bounds_arr = np.asarray(bounds, dtype=float).reshape(2, 2)
-        except (TypeError, ValueError):
-            bounds_arr = np.full((2, 2), np.nan)
-        if not (np.all(np.isfinite(bounds_arr)) and np.all(bounds_arr[:, 0] < bounds_arr[:, 1])):
-            raise MechanismError(
-                f"bounds: expected [[lo, hi], [lo, hi]] with lo < hi for the plane {plane!r}, "
-                f"got {bounds!r}")
+        bounds_arr = _bounds_arg(bounds, plane)
+    # memory, before anything is allocated: the seeding chart, then the traced points
+    if budget is None:
+        cell = _cell_cost(mech)
+        check_size(where, "grid", n, cell, power=2, lo=2, fixed=reserved,
+                   unit=f"one seeding point of {_n_combos(mech)} posture combination(s)")
+        per_point = _point_cost(model) if point_cost is None else point_cost
+        spent = reserved + SAFETY * cell * n * n
+        if user_steps:
+            check_size(where, "max_steps", max_steps, 2 * per_point, fixed=spent,
+                       unit="two traced points (a curve runs max_steps each way)")
+        else:
+            max_steps = max(1, min(DEFAULT_MAX_STEPS, largest_size(2 * per_point, fixed=spent)))
+        budget = _Budget(Deadline(), max(2, int((memory_budget() - spent)
+                                                 / (SAFETY * per_point))))
+    elif not user_steps:
+        max_steps = DEFAULT_MAX_STEPS
     bounds_full = {pidx[0]: tuple(bounds_arr[0]), pidx[1]: tuple(bounds_arr[1])}
     rng = np.random.default_rng(0)
     curves: list[Curve] = []
@@ -1093,6 +1169,8 @@ def singular_curves(
     messages = []
     pvals = np.array([fixed_map[i] for i in fixed_idx])
     for cond, lim in conds:
+        if budget.exhausted():
+            break
         sys = augmented_system(mech, cond, fixed_idx)
         if mech.kind == "legs":
             seeds_v = _seeds_legs(sys, cond, fixed_map, lim, n, bounds_full)
@@ -1101,10 +1179,10 @@ def singular_curves(
                 raise MechanismError(
                     f"{mech.name}: parallel curves of a Khalil mechanism need 2 actuated "
                     "joints and no section (fixed); 1-DoF chains: kind='closure'")
-            seeds_v = _seeds_khalil_parallel(mech, names, max(8, n // 2), n, hmax)
+            seeds_v = _seeds_khalil_parallel(mech, names, max(8, n // 2), n, hmax, budget)
         else:
-            seeds_v = _seeds_khalil(sys, fixed_map, n, rng)
-        tr = _Tracer(sys, pvals, lim, pidx, bounds_arr, hmax, tol, max_steps)
+            seeds_v = _seeds_khalil(sys, fixed_map, n, rng, budget)
+        tr = _Tracer(sys, pvals, lim, pidx, bounds_arr, hmax, tol, max_steps, budget)
         free = np.array(sys.free_idx)
         seeds_u = [v[free] / tr.scl for v in seeds_v]
         n_seeds += len(seeds_u)
@@ -1138,7 +1216,7 @@ def singular_curves(
         for c in curves:
             if c.kind == "parallel":
                 sys = augmented_system(mech, "parallel", fixed_idx)
-                tr = _Tracer(sys, pvals, 0.0, pidx, bounds_arr, hmax, tol, max_steps)
+                tr = _Tracer(sys, pvals, 0.0, pidx, bounds_arr, hmax, tol, max_steps, budget)
                 found += _cusps_on(tr, c, pidx, fixed_idx, fixed_map)
         if found:
             cusp_pts = np.array(found)
@@ -1147,7 +1225,7 @@ def singular_curves(
     for c in curves:
         if c.kind == "closure" and c.det_Wp is not None:
             sys = augmented_system(mech, "closure", fixed_idx)
-            tr = _Tracer(sys, pvals, 0.0, pidx, bounds_arr, hmax, tol, max_steps)
+            tr = _Tracer(sys, pvals, 0.0, pidx, bounds_arr, hmax, tol, max_steps, budget)
             act_pts += _det_zeros_on(tr, c, fixed_idx, fixed_map)
     maxres = max((float(np.max(c.residual)) for c in curves), default=0.0)
     ok = bool(curves) and maxres < 1e-9
@@ -1155,6 +1233,9 @@ def singular_curves(
     msg = f"{len(curves)} curve(s), {len(bps)} branch point(s), max residual {maxres:.1e}"
     if messages:
         msg += "; " + "; ".join(messages)
+    if budget.reason is not None:
+        ok, status = False, budget.reason
+        msg += "; " + budget.message(where)
     if any("max_steps" in c.ends or "stalled" in c.ends for c in curves):
         msg += "; some curves stopped early (stalled or max_steps)"
     per_plane = tuple(bool(p and (b[1] - b[0]) >= TWO_PI - 1e-9) for p, b in zip(per2, bounds_arr))
@@ -1261,17 +1342,128 @@ def _cusps_on(tr: _Tracer, c: Curve, pidx, fixed_idx, fixed_map) -> list[np.ndar
 
 
 def check_number(name: str, v: Any, *, integer: bool = False, low: float = 0.0,
-                 strict: bool = False, optional: bool = False) -> None:
-    """Raise a MechanismError naming ``name`` unless ``v`` is a finite number >= ``low``.
+                 strict: bool = False, optional: bool = False) -> Any:
+    """``v`` as a finite int or float >= ``low``, else a MechanismError naming ``name``.
 
-    ``strict``: > ``low``; ``integer``: a whole number; ``optional``: None is accepted.
+    ``strict``: > ``low``; ``integer``: a whole number; ``optional``: None is accepted (and
+    returned).
     """
     if v is None and optional:
-        return
-    ok = (isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
-          and bool(np.isfinite(v)) and (v > low if strict else v >= low)
-          and (not integer or float(v).is_integer()))
-    if not ok:
-        what = "an integer" if integer else "a number"
-        rel = ">" if strict else ">="
-        raise MechanismError(f"{name}: expected {what} {rel} {low:g}, got {v!r}")
+        return None
+    what = "an integer" if integer else "a number"
+    rel = ">" if strict else ">="
+    try:
+        x = as_int(v, name) if integer else as_float(v, name)
+    except MechanismError:
+        x = None
+    if x is None or (x <= low if strict else x < low):
+        raise MechanismError(f"{name}: expected {what} {rel} {low:g}, got {show(v)}")
+    return x
+
+
+# ---------------------------------------------------------------------------------------
+# arguments and budgets
+# ---------------------------------------------------------------------------------------
+
+#: Default (and, when not given, budget-lowered) ``max_steps`` of :func:`singular_curves`.
+DEFAULT_MAX_STEPS = 20000
+#: Range of the continuation ``step`` (scaled units): below, curves take millions of
+#: points; above, a step jumps across the mechanism.
+MIN_STEP, MAX_STEP = 1e-6, 1.0
+
+# Measured memory (peak resident growth, /proc/self/status VmHWM, of a fresh process).
+# Seeding chart: per grid cell (grid^2 of them) and posture combination of the legs, its
+# platform coordinates, leg inverse kinematics, full points, the mapped evaluation of the
+# condition and the sign-change search: a + b * nv bytes (nv = na + nx variables; e.g. 333
+# bytes per cell for the aspects of a five-bar, 4 combinations, at grid 1600).
+_COST_CELL = (40.0, 110.0)
+_COST_LEG = 0.0
+# Per traced point: the tracer's list, the curve arrays (v, plane points, residual, det,
+# B, working modes) and its JSON (to_dict): a + b * nv bytes.
+_COST_POINT = (600.0, 60.0)
+
+
+class _Budget:
+    """What one call may still spend: a deadline and a number of traced points."""
+
+    def __init__(self, deadline: Deadline | None = None, max_points: int | None = None) -> None:
+        self.deadline = deadline if deadline is not None else Deadline()
+        self.max_points = max_points
+        self.points = 0
+        self.reason: str | None = None
+
+    def exhausted(self) -> bool:
+        if self.reason is None:
+            if self.max_points is not None and self.points >= self.max_points:
+                self.reason = "memory_budget"
+            elif self.deadline.expired():
+                self.reason = "time_limit"
+        return self.reason is not None
+
+    def message(self, where: str) -> str:
+        if self.reason == "memory_budget":
+            return (f"{where}: stopped after {self.points} traced points, the most the memory "
+                    "budget allows (OPTKIN_MEMORY_BUDGET); the curves are incomplete: give a "
+                    "larger step or a smaller box")
+        return self.deadline.message(where)
+
+
+def _n_combos(mech: Mechanism) -> int:
+    if mech.kind != "legs":
+        return 1
+    return int(np.prod([2 if leg.type == "RRR" else 1 for leg in mech.legs]))
+
+
+def _cell_cost(mech: Mechanism) -> float:
+    """Bytes per cell of the seeding chart (grid^2 cells), without the safety factor."""
+    model = get_model(mech)
+    a, b = _COST_CELL
+    return a + b * (model.na + model.nx) + _COST_LEG * len(getattr(mech, "legs", ()) or ())
+
+
+def _point_cost(model: Any) -> float:
+    a, b = _COST_POINT
+    return a + b * (model.na + model.nx)
+
+
+def _check_mech_size(model: Any) -> None:
+    L = float(model.length)
+    if not (np.isfinite(L) and L <= MAX_ABS):
+        raise MechanismError(
+            f"{model.mech.name}: the mechanism's size {L:g} is too large (above {MAX_ABS:g}): "
+            "squares of its lengths overflow; give lengths of sensible size (change the unit)")
+
+
+def _mapping_arg(v: Any, name: str) -> dict[Any, Any]:
+    if v is None:
+        return {}
+    if not isinstance(v, Mapping):
+        raise MechanismError(f"{name}: expected a dict name -> value, got {type(v).__name__}")
+    return dict(v)
+
+
+def _pair_arg(v: Any, name: str) -> tuple[float, float]:
+    try:
+        lo, hi = as_vector(v, name, 2)
+    except MechanismError:
+        lo = hi = float("nan")
+    if not lo < hi:
+        raise MechanismError(f"{name}: expected a pair (lo, hi) of finite numbers with "
+                             f"lo < hi, got {show(v)}")
+    return float(lo), float(hi)
+
+
+def _bounds_arg(bounds: Any, plane: Any) -> np.ndarray:
+    b = None
+    try:
+        b = as_matrix(bounds, "bounds", (2, 2))
+    except MechanismError:
+        try:
+            b = as_vector(bounds, "bounds", 4).reshape(2, 2)
+        except MechanismError:
+            b = None
+    if b is None or not np.all(b[:, 0] < b[:, 1]):
+        raise MechanismError(
+            f"bounds: expected [[lo, hi], [lo, hi]] with lo < hi (finite, magnitude at most "
+            f"{MAX_ABS:g}) for the plane {show(plane)}, got {show(bounds)}")
+    return b
