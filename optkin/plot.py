@@ -8,8 +8,15 @@ from typing import Any
 
 import numpy as np
 
+from .errors import MechanismError
+from .limits import check_size
 from .mechanism import Mechanism
 from .results import KinResult
+
+#: Measured memory per panel of :func:`draw` (peak resident growth, VmHWM, of a fresh
+#: process: its Axes, lines and share of the PNG raster, about 1.1 MB planar and 1.3 MB
+#: spatial); limits.SAFETY is applied on top.
+_COST_PANEL = 2.0e6
 
 __all__ = ["draw", "chain_points"]
 
@@ -25,6 +32,13 @@ def _mpl():
 
 def chain_points(mech: Mechanism, r: KinResult) -> list[np.ndarray]:
     """Polylines (arrays (k, 3)) of the mechanism's links at the configuration of ``r``."""
+    from .solvers.common import check_mechanism, check_result_of
+
+    check_mechanism(mech, "chain_points")
+    if not isinstance(r, KinResult):
+        raise MechanismError(f"r: expected a KinResult (from optkin.forward, inverse, "
+                             f"assembly_modes, track), got {type(r).__name__}")
+    check_result_of(mech, r, "r")
     lines: list[np.ndarray] = []
     if mech.kind == "khalil":
         qmap = dict(zip(mech.joint_names, r.q))
@@ -69,15 +83,29 @@ def draw(
 ) -> str:
     """Draw ``mech`` in one or several configurations (one panel each) to a PNG file.
 
-    Returns the path written.
+    Returns the path written. Memory: about 2 MB per panel (one panel per configuration),
+    checked against the memory budget of :mod:`optkin.limits` before drawing.
     """
     from .solvers.common import check_mechanism, check_result_of
 
     check_mechanism(mech, "draw")
-    rs = [results] if isinstance(results, KinResult) else list(results)
+    if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
+        raise MechanismError(f"path: expected a file name (str or os.PathLike) for the PNG, "
+                             f"got {type(path).__name__}")
+    if isinstance(results, KinResult):
+        rs = [results]
+    elif isinstance(results, (str, bytes)) or not hasattr(results, "__iter__"):
+        rs = [results]  # refused below
+    else:
+        if hasattr(results, "__len__"):  # before making a list of it
+            check_size("draw", "len(results)", len(results), _COST_PANEL, lo=0,
+                       unit="one panel of the picture")
+        rs = list(results)
+    check_size("draw", "len(results)", len(rs), _COST_PANEL, lo=0,
+               unit="one panel of the picture")
+    if title is not None and not isinstance(title, str):
+        raise MechanismError(f"title: expected a string, got {type(title).__name__}")
     if not all(isinstance(r, KinResult) for r in rs):
-        from .errors import MechanismError
-
         raise MechanismError(
             "results: expected a KinResult or a sequence of them (from optkin.forward, "
             f"inverse, assembly_modes, track), got {type(results).__name__}")
@@ -127,8 +155,12 @@ def draw(
     fig.suptitle(title or f"{mech.name}: {len(rs)} configuration(s)")
     fig.tight_layout()
     path = os.fspath(path)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    try:
+        fig.savefig(path, dpi=100)
+    except OSError as e:
+        raise MechanismError(f"path: cannot write the PNG {path!r}: {e.strerror or e}") from None
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -19,15 +19,19 @@ with warm starts along the grid. At each point it evaluates, from :func:`optkin.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from .._checks import as_float, as_matrix, as_vector
 from ..errors import MechanismError
+from ..limits import Deadline, check_size, show
 from ..mechanism import Mechanism
 from ..model import get_model
+from ..results import KinResult
 from .velocity import jacobians
 
 __all__ = ["SingularityMap", "singularity_map", "plot_singularity_map", "MEASURES"]
@@ -59,6 +63,9 @@ class SingularityMap:
     values: dict[str, np.ndarray]
     fixed: dict[str, float] = field(default_factory=dict)
     path: str | None = None
+    success: bool = True
+    status: str = "ok"
+    message: str = ""
 
     def __repr__(self) -> str:
         reach = int(np.isfinite(self.values["distance"]).sum()) if "distance" in self.values else 0
@@ -124,29 +131,49 @@ def singularity_map(
     Returns
     -------
     SingularityMap
+        With ``success``/``status``/``message``: when the time budget of
+        :mod:`optkin.limits` runs out, the points not sampled stay NaN, ``success`` is False
+        and ``status`` is ``"time_limit"``.
+
+    The grid costs about 300 bytes per point (measures and picture: 215 measured), checked
+    against the memory budget of :mod:`optkin.limits` before sampling
+    (``len(u) * len(v)``).
     """
     from ..solvers import forward, inverse
     from ..solvers.common import check_mechanism
 
     check_mechanism(mech, "singularity_map")
     u, v = _axis_values("u", u), _axis_values("v", v)
-    fixed = dict(fixed or {})
+    check_size("singularity_map", "len(u) * len(v)", u.size * v.size, _COST_MAP_POINT, lo=4,
+               fixed=_COST_FIGURE, unit="one grid point: its measures and its cell of the "
+               "picture")
+    fixed = _fixed_arg(fixed)
+    ax_given = _axes_arg(axes)
+    guess = _guess_arg(guess)
+    deadline = Deadline()
+    stopped: str | None = None
     vals = {k: np.full((v.size, u.size), np.nan) for k in MEASURES}
     if mech.kind == "legs":
         names = list(mech.task)
-        ax = tuple(axes) if axes is not None else (names[0], names[1])
+        ax = ax_given if ax_given is not None else (names[0], names[1])
         for a in ax:
             if a not in names:
-                raise MechanismError(f"axes: {a!r} is not a task coordinate of {mech.name} "
+                raise MechanismError(f"axes: {show(a)} is not a task coordinate of {mech.name} "
                                      f"({names})")
         base = np.array(mech.home if mech.home is not None else np.zeros(len(names)), float)
         for k, val in fixed.items():
             if k not in names:
-                raise MechanismError(f"fixed: {k!r} is not a task coordinate ({names})")
-            base[names.index(k)] = float(val)
-        mode = None if working_mode is None else tuple(int(s) for s in working_mode)
+                raise MechanismError(f"fixed: {show(k)} is not a task coordinate ({names})")
+            base[names.index(k)] = val
+        mode = _mode_arg(working_mode, len(mech.legs))
         for i, vv in enumerate(v):
+            if stopped:
+                break
             for j, uu in enumerate(u):
+                if deadline.expired():
+                    stopped = deadline.message("singularity_map") + (
+                        f": sampled {i * u.size + j} of {u.size * v.size} points")
+                    break
                 t = base.copy()
                 t[names.index(ax[0])] = uu
                 t[names.index(ax[1])] = vv
@@ -165,21 +192,27 @@ def singularity_map(
         fixed_out = {n: float(base[names.index(n)]) for n in names if n not in ax}
     else:
         names = list(mech.active_names)
-        ax = tuple(axes) if axes is not None else (names[0], names[1] if len(names) > 1 else
+        ax = ax_given if ax_given is not None else (names[0], names[1] if len(names) > 1 else
                                                     names[0])
         for a in ax:
             if a not in names:
-                raise MechanismError(f"axes: {a!r} is not an active joint of {mech.name} "
+                raise MechanismError(f"axes: {show(a)} is not an active joint of {mech.name} "
                                      f"({names})")
         base = np.zeros(len(names))
         for k, val in fixed.items():
             if k not in names:
-                raise MechanismError(f"fixed: {k!r} is not an active joint ({names})")
-            base[names.index(k)] = float(val)
+                raise MechanismError(f"fixed: {show(k)} is not an active joint ({names})")
+            base[names.index(k)] = val
         prev_row = guess
         for i, vv in enumerate(v):
+            if stopped:
+                break
             prev = prev_row
             for j, uu in enumerate(u):
+                if deadline.expired():
+                    stopped = deadline.message("singularity_map") + (
+                        f": sampled {i * u.size + j} of {u.size * v.size} points")
+                    break
                 qa = base.copy()
                 qa[names.index(ax[0])] = uu
                 qa[names.index(ax[1])] = vv
@@ -192,7 +225,12 @@ def singularity_map(
                 for k, m in _measures(jacobians(mech, r)).items():
                     vals[k][i, j] = m
         fixed_out = {n: float(base[names.index(n)]) for n in names if n not in ax}
-    return SingularityMap(mech.name, (str(ax[0]), str(ax[1])), u, v, vals, fixed_out)
+    sm = SingularityMap(mech.name, (str(ax[0]), str(ax[1])), u, v, vals, fixed_out)
+    if stopped:
+        sm.success, sm.status, sm.message = False, "time_limit", stopped
+    else:
+        sm.message = f"{int(np.isfinite(vals['distance']).sum())} of {u.size * v.size} points reachable"
+    return sm
 
 
 def plot_singularity_map(
@@ -238,8 +276,17 @@ def plot_singularity_map(
     ...     os.path.getsize(sm.path) > 0
     True
     """
-    if measure not in MEASURES:
-        raise MechanismError(f"measure: {measure!r} is not one of {list(MEASURES)}")
+    if not isinstance(measure, str) or measure not in MEASURES:
+        raise MechanismError(f"measure: {show(measure)} is not one of {list(MEASURES)}")
+    if not isinstance(log, (bool, np.bool_)):
+        raise MechanismError(f"log: expected True or False, got {show(log)}")
+    if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
+        raise MechanismError(f"path: expected a file name (str or os.PathLike) for the PNG, "
+                             f"got {type(path).__name__}")
+    unknown = sorted(set(kwargs) - set(_KWARGS))
+    if unknown:
+        raise MechanismError(f"plot_singularity_map: unknown argument(s) {unknown}; known: "
+                             f"{list(_KWARGS)} (of singularity_map)")
     import matplotlib
 
     matplotlib.use("Agg")
@@ -248,6 +295,20 @@ def plot_singularity_map(
     sm = singularity_map(mech, u, v, **kwargs)
     Z = sm.values[measure]
     fig, axp = plt.subplots(figsize=(6, 5))
+    try:
+        _draw_map(fig, axp, sm, Z, measure, log, mech.name)
+        fig.savefig(path, dpi=100)
+    except OSError as e:
+        raise MechanismError(f"path: cannot write the PNG {os.fspath(path)!r}: "
+                             f"{e.strerror or e}") from None
+    finally:
+        plt.close(fig)
+    sm.path = str(path)
+    return sm
+
+
+def _draw_map(fig: Any, axp: Any, sm: SingularityMap, Z: np.ndarray, measure: str,
+              log: bool, name: str) -> None:
     with np.errstate(divide="ignore", invalid="ignore"):
         data = np.log10(np.maximum(Z, 1e-16)) if log else Z
     mesh = axp.pcolormesh(sm.u, sm.v, np.ma.masked_invalid(data), shading="auto",
@@ -264,22 +325,71 @@ def plot_singularity_map(
     axp.set_xlabel(sm.axes[0])
     axp.set_ylabel(sm.axes[1])
     fx = ", ".join(f"{k}={v:.3g}" for k, v in sm.fixed.items())
-    axp.set_title(f"{mech.name}: {measure}" + (f" ({fx})" if fx else ""))
+    axp.set_title(f"{name}: {measure}" + (f" ({fx})" if fx else ""))
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    sm.path = str(path)
-    return sm
 
 
 def _axis_values(name: str, a: Any) -> np.ndarray:
     """The grid values of one axis: at least two finite numbers, else a MechanismError."""
     try:
-        out = np.asarray(a, dtype=float)
-    except (TypeError, ValueError):
+        out = as_vector(a, name)
+    except MechanismError:
         out = np.full(0, np.nan)
-    if out.ndim != 1 or out.size < 2 or not np.all(np.isfinite(out)):
+    if out.ndim != 1 or out.size < 2:
         raise MechanismError(
             f"{name}: expected a 1-D sequence of at least 2 finite grid values (e.g. "
-            f"np.linspace(lo, hi, 21)), got {a!r}")
+            f"np.linspace(lo, hi, 21)), got {show(a)}")
     return out
+
+
+# Measured memory per grid point (peak resident growth, VmHWM, of a fresh process): the
+# four measures, and the picture of plot_singularity_map (pcolormesh cells, contour,
+# the PNG raster: 215 bytes measured at 1000 x 1000); limits.SAFETY is applied on top.
+_COST_MAP_POINT = 300.0
+#: ... and of the figure itself (its raster and artists, 16 MB measured), with SAFETY.
+_COST_FIGURE = 24e6
+_KWARGS = ("axes", "fixed", "working_mode", "guess")
+
+
+def _fixed_arg(fixed: Any) -> dict[str, float]:
+    if fixed is None:
+        return {}
+    if not isinstance(fixed, Mapping):
+        raise MechanismError(f"fixed: expected a dict name -> value, got {type(fixed).__name__}")
+    out = {}
+    for k, val in fixed.items():
+        if not isinstance(k, str):
+            raise MechanismError(f"fixed: expected coordinate names as keys, got {show(k)}")
+        out[k] = as_float(val, f"fixed[{show(k)}]")
+    return out
+
+
+def _axes_arg(axes: Any) -> tuple[str, str] | None:
+    if axes is None:
+        return None
+    if (isinstance(axes, str) or not isinstance(axes, Sequence) or len(axes) != 2
+            or not all(isinstance(a, str) for a in axes)):
+        raise MechanismError(f"axes: expected two coordinate names, got {show(axes)}")
+    return (axes[0], axes[1])
+
+
+def _mode_arg(mode: Any, n: int) -> tuple[int, ...] | None:
+    if mode is None:
+        return None
+    try:
+        m = as_vector(mode, "working_mode", n)
+    except MechanismError:
+        m = np.zeros(0)
+    if m.size != n or not np.all(np.isin(m, (-1.0, 1.0))):
+        raise MechanismError(f"working_mode: expected {n} signs (+1 or -1), one per leg, got "
+                             f"{show(mode)}")
+    return tuple(int(x) for x in m)
+
+
+def _guess_arg(guess: Any) -> Any:
+    if guess is None or isinstance(guess, KinResult):
+        return guess
+    try:
+        return as_matrix(guess, "guess")
+    except MechanismError:
+        return as_vector(guess, "guess")
