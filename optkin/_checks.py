@@ -48,13 +48,24 @@ def _err(error: type[Exception], where: str, msg: str, path: Path = ()) -> Excep
         return error(f"{where}: {msg}")
 
 
+def _digits(iv: int) -> str:
+    """An int for a message: itself when short, else its first digits and size (str() of an
+    int of more than 4300 digits raises ValueError)."""
+    if abs(iv) < 10**24:
+        return str(iv)
+    if iv.bit_length() > 10_000:
+        return f"{'-' if iv < 0 else ''}(an integer of {iv.bit_length()} bits)"
+    s = str(iv)
+    return f"{s[:20]}... ({len(s.lstrip('-'))} digits)"
+
+
 def _scalar(v: Any, where: str, error: type[Exception], path: Path) -> float:
     if isinstance(v, bool) or isinstance(v, np.bool_):
         raise _err(error, where, f"expected a number, got {v!r}", path)
     if isinstance(v, numbers.Integral):
         iv = int(v)
         if abs(iv) > MAX_ABS:
-            raise _err(error, where, f"the integer {str(iv)[:20]}... is too large "
+            raise _err(error, where, f"the integer {_digits(iv)} is too large "
                        f"(magnitude above {MAX_ABS:g}); give a number of sensible size", path)
         return float(iv)
     if isinstance(v, numbers.Real):
@@ -121,11 +132,11 @@ def as_int(v: Any, where: str, *, lo: int | None = None, hi: int | None = None,
     else:
         raise _err(error, where, f"expected an integer, got {_show(v)}", path)
     if lo is not None and iv < lo:
-        raise _err(error, where, f"expected an integer >= {lo}, got {str(iv)[:24]}", path)
+        raise _err(error, where, f"expected an integer >= {lo}, got {_digits(iv)}", path)
     if hi is not None and iv > hi:
-        raise _err(error, where, f"expected an integer <= {hi}, got {str(iv)[:24]}", path)
+        raise _err(error, where, f"expected an integer <= {hi}, got {_digits(iv)}", path)
     if abs(iv) > MAX_ABS:
-        raise _err(error, where, f"the integer {str(iv)[:20]}... is too large", path)
+        raise _err(error, where, f"the integer {_digits(iv)} is too large", path)
     return iv
 
 
