@@ -173,9 +173,10 @@ class KhalilTable:
                 raise MechanismError(f"params: {_show(k)} is not a valid parameter name",
                                      path=("params",))
             params[k] = as_float(v, f"params.{k}", path=("params", k))
-        if isinstance(loops, bool) or not isinstance(loops, (int, np.integer)) or loops < 0:
-            raise MechanismError(f"loops: expected a non-negative integer, got {_show(loops)}",
-                                 path=("loops",))
+        if isinstance(loops, bool) or not isinstance(loops, (int, np.integer)) or not (
+                0 <= loops <= MAX_FRAMES):
+            raise MechanismError(f"loops: expected a non-negative integer (at most "
+                                 f"{MAX_FRAMES // 2}), got {_show(loops)}", path=("loops",))
         if isinstance(rows, (str, bytes)) or not isinstance(rows, (Sequence, np.ndarray)):
             raise MechanismError("rows: expected a list of rows, one per frame", path=("rows",))
         if len(rows) == 0:

@@ -416,13 +416,16 @@ def degenerate_points(legs: Sequence[Leg], platform: str
     prism = [leg.type in ("RPR", "UPS", "SPS") for leg in legs]
     B = np.array([leg.base for leg in legs], dtype=float)
     P = np.array([leg.platform for leg in legs], dtype=float)
-    L = max(float(np.abs(B).max()), float(np.abs(P).max()), 1e-300)
-    tol = 1e-12 * L
+    # "coincide" relative to the size of the points compared (base and platform points may
+    # differ in size by many orders of magnitude)
+    def tol(*pts: np.ndarray) -> float:
+        return 1e-12 * max(max(float(np.abs(p).max()) for p in pts), 1e-300)
+
     fix = "move them apart so that the legs' lines are independent"
     def flat(pts: np.ndarray, k: int) -> bool:  # the points span at most k dimensions
         c = pts - pts.mean(axis=0)
         s = singular_values(c, "attachment points")
-        return bool(s.size <= k or s[k] <= tol)
+        return bool(s.size <= k or s[k] <= tol(pts))
 
     every = tuple(range(n))
     if platform == "planar":
@@ -454,8 +457,8 @@ def degenerate_points(legs: Sequence[Leg], platform: str
                     f"configuration is regular); {fix}")
     for i in range(n):
         for j in range(i + 1, n):
-            if prism[i] and prism[j] and np.abs(B[i] - B[j]).max() <= tol and np.abs(
-                    P[i] - P[j]).max() <= tol:
+            if prism[i] and prism[j] and np.abs(B[i] - B[j]).max() <= tol(B) and np.abs(
+                    P[i] - P[j]).max() <= tol(P):
                 return ("", (i, j), f"legs {i + 1} and {j + 1} have the same base point "
                         f"{_pts(B[i])} and the same platform point {_pts(P[i])}: one line of "
                         "force twice, so the platform moves with the actuators locked at every "

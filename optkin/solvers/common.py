@@ -47,7 +47,7 @@ def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: 
                 raise MechanismError(
                     f"{where}: option {k} must be a number >= 0 (default {d!r}), got {_show(v)}",
                     path=("options", k)) from None
-            v = int(v) if isinstance(v, (int, np.integer)) else f
+            v = int(v) if isinstance(d, int) and isinstance(v, (int, np.integer)) else f
         out[k] = v
     return out
 

@@ -168,7 +168,7 @@ def _directions(directions: Any, sm: StaticModel) -> np.ndarray:
             rows.append(e)
         return np.array(rows)
     try:
-        D = np.atleast_2d(as_matrix(np.atleast_2d(_float_array(directions)), "directions",
+        D = np.atleast_2d(as_matrix(_rows(directions), "directions",
                                     error=StaticsError, path=("directions",)))
     except StaticsError:
         raise StaticsError(
@@ -194,6 +194,12 @@ def _float_array(v: Any) -> Any:
         return np.asarray(v, dtype=float)
     except (TypeError, ValueError, OverflowError, RecursionError):
         return v
+
+
+def _rows(v: Any) -> Any:
+    """``v`` as a 2-D float array (one row for a vector) when numpy can read it, else ``v``."""
+    a = _float_array(v)
+    return np.atleast_2d(a) if isinstance(a, np.ndarray) else a
 
 
 def box(lower: Any, upper: Any) -> np.ndarray:
@@ -250,7 +256,7 @@ def _wrench_set(ws: Any, sm: StaticModel) -> np.ndarray:
         V = box(low[lo_k], low[hi_k])
     else:
         try:
-            V = as_matrix(np.atleast_2d(_float_array(ws)), "wrench_set", error=StaticsError,
+            V = as_matrix(_rows(ws), "wrench_set", error=StaticsError,
                           path=("wrench_set",))
         except StaticsError:
             V = np.full((0, 0), np.nan)
@@ -915,7 +921,7 @@ def wrench_feasible_workspace(
         grid_shape = X.shape
     else:
         try:
-            P = as_matrix(np.atleast_2d(_float_array(poses)), "poses", (None, td),
+            P = as_matrix(_rows(poses), "poses", (None, td),
                           error=StaticsError)
         except (StaticsError, ValueError):
             P = np.zeros((0, 0))
@@ -995,11 +1001,17 @@ def wrench_feasible_workspace(
 
 
 def _norm_name(norm: Any) -> str:
-    if isinstance(norm, (str, int, float, np.integer, np.floating)) and not isinstance(
-            norm, (bool, np.bool_)):
-        if norm in (2, "2", 2.0, "l2", "two"):
+    if isinstance(norm, str):
+        if norm in ("2", "l2", "two"):
             return "2"
-        if norm in ("inf", "max", "linf") or (not isinstance(norm, str) and np.isposinf(norm)):
+        if norm in ("inf", "max", "linf"):
+            return "inf"
+    elif isinstance(norm, (int, float, np.integer, np.floating)) and not isinstance(
+            norm, (bool, np.bool_)):
+        f = float(norm) if abs(norm) < 1e300 else float("nan")  # no OverflowError for 10**400
+        if f == 2.0:
+            return "2"
+        if f == float("inf") or norm == float("inf"):
             return "inf"
     raise StaticsError(f"norm: expected 2 or 'inf', got {show(norm)}", path=("norm",))
 
