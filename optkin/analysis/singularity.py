@@ -367,6 +367,8 @@ def _degenerate(jac: Jacobians, model: Any, f: Any, Wp_s: np.ndarray, rs: np.nda
         Hx = np.array(f.hess_x(jac.qa, jac.x, u))
         Dv = model.x_scale[:, None] * V
         Ms.append(Dv.T @ Hx @ Dv)
+    if not all(np.isfinite(M).all() for M in Ms):  # second derivatives overflow: no verdict
+        return False, float("nan")
     if k_r == 1:
         q2 = float(max(abs(M[0, 0]) for M in Ms))
         return q2 < tol2, q2
@@ -375,7 +377,8 @@ def _degenerate(jac: Jacobians, model: Any, f: Any, Wp_s: np.ndarray, rs: np.nda
 
     def obj(v):
         v = v / np.linalg.norm(v)
-        return sum(float(v @ M @ v) ** 2 for M in Ms)
+        with np.errstate(over="ignore", invalid="ignore"):
+            return float(sum(np.square(v @ M @ v) for M in Ms))
 
     rng = np.random.default_rng(0)
     best = min(minimize(obj, rng.normal(size=k_r), method="Nelder-Mead",

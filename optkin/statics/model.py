@@ -67,7 +67,7 @@ import numpy as np
 
 from .. import numeric
 from .._cache import KeyedCache
-from .._checks import as_vector
+from .._checks import as_float, as_vector
 from .._checks import show as _show
 from ..analysis._functions import _twist_jacobian
 from ..errors import MechanismError, NumericError, StaticsError
@@ -311,6 +311,12 @@ def static_model(mech: Mechanism, q: Any, sing_tol: float = SING_TOL) -> StaticM
     >>> sm.singularity, np.round(np.abs(sm.unresisted.ravel()), 12).tolist()
     ('parallel', [0.0, 0.0, 1.0])
     """
+    try:
+        sing_tol = as_float(sing_tol, "sing_tol", lo=0.0, hi=1.0, error=StaticsError,
+                            path=("sing_tol",))
+    except StaticsError:
+        raise StaticsError(f"sing_tol: expected a number in [0, 1] (default {SING_TOL:g}), got "
+                           f"{_show(sing_tol)}", path=("sing_tol",)) from None
     model = get_model(mech)
     qa, x = _config(model, q)
     _, Wp, Wa = model.jac(qa, x)
