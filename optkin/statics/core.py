@@ -77,7 +77,7 @@ def _options(options: Mapping[str, Any], where: str) -> dict[str, Any]:
     if not (float(opts["chunk"]).is_integer() and 1 <= opts["chunk"] <= 4096):
         raise bad("chunk", "an integer in [1, 4096]")
     opts["chunk"] = int(opts["chunk"])
-    if opts["reuse"] not in (True, False) or not isinstance(opts["reuse"], (bool, int, np.bool_)):
+    if not isinstance(opts["reuse"], (bool, int, np.bool_)) or opts["reuse"] not in (True, False):
         raise bad("reuse", "True or False")
     solver = opts["solver"]
     if solver is not None:
