@@ -242,11 +242,16 @@ MECHS = {
     "rpr3": M.rpr3(BASE, PLAT),
     "five_bar": M.five_bar(1.0, 1.0, 1.0, 1.0, 1.0),
     "four_bar": M.four_bar(1.0, 2.0, 2.0, 2.5),
+    "sr400": M.sr400(),
+    "delta": M.delta(),
 }
 CLOSED = {
     "rpr3": optkin.forward(MECHS["rpr3"], [0.5, 0.5, 0.5]),
     "five_bar": optkin.inverse(MECHS["five_bar"], [0.5, 1.2])[0],
     "four_bar": optkin.forward(MECHS["four_bar"], [1.0]),
+    "sr400": optkin.forward(MECHS["sr400"], [0.3, -0.4, 0.2, 0.5, 0.4, 0.6],
+                            guess=[np.pi / 2 + 1, -1, np.pi + 1]),
+    "delta": optkin.forward(MECHS["delta"], [0.3, 0.3, 0.3]),
 }
 assert all(r.success for r in CLOSED.values())
 OPTION_NAMES = ["tol", "max_iter", "polish", "method", "starts", "iters", "seed", "rtol",
@@ -312,7 +317,7 @@ def _statics(data):
                                  matrices(na, 2, -3.0, 3.0), scalar, st.none()))
     opts = {k: v for k, v in data.draw(options).items() if k != "chunk"}
     directions = data.draw(st.one_of(st.none(), matrices(2, nw), st.lists(
-        st.sampled_from(["fx", "fy", "mz", "-fx", "fz", 3]), max_size=3), scalar))
+        st.sampled_from(["fx", "fy", "mz", "-fx", "fz", "-my", 3]), max_size=3), scalar))
     check(lambda: statics.capability(m, q, limits, directions, **opts))
     ws = data.draw(st.one_of(vectors(nw, -1e3, 1e3), matrices(2, nw), st.fixed_dictionaries(
         {"lower": vectors(nw, -1, 0), "upper": vectors(nw, 0, 1)}), scalar))
