@@ -27,6 +27,7 @@ import numpy as np
 from .. import numeric
 from .._checks import as_float, as_int
 from .._checks import show as _show
+from .._dryrun import checkpoint
 from ..errors import MechanismError, NumericError
 from ..mechanism import Mechanism
 from ..model import get_model
@@ -317,6 +318,7 @@ def dof(mech: Mechanism, samples: int = 5, seed: int = 0, rtol: float = 1e-8) ->
                              f"{_show(rtol)}", path=("rtol",))
     rtol = rtol_f
     seed = as_int(seed, "dof: seed", lo=0, path=("seed",))
+    checkpoint()  # validation stops here: every argument is checked
     inv = joint_inventory(mech)
     freedoms = inv["freedoms"]
     lam = inv["lambda"]

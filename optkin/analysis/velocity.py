@@ -34,6 +34,7 @@ import numpy as np
 from .. import numeric
 from .._checks import as_float, as_vector
 from .._checks import show as _show
+from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
@@ -318,6 +319,7 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
     model = get_model(mech)
     f = analysis_functions(mech)
     qv, qa, x = config_of(mech, q)
+    checkpoint()  # validation stops here: every argument is checked
     phi_m, Wp_m, Wa_m = (np.array(v) for v in model.jac(qa, x))
     defined = bool(np.isfinite(phi_m).all() and np.isfinite(Wp_m).all()
                    and np.isfinite(Wa_m).all())

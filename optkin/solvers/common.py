@@ -12,6 +12,7 @@ import numpy as np
 
 from .._checks import MAX_ABS, as_float, as_matrix, as_vector
 from .._checks import show as _show
+from .._dryrun import options_strict
 from ..errors import MechanismError, NumericError
 from ..model import Model
 from ..numeric import singular_values
@@ -22,7 +23,8 @@ __all__ = ["merge_options", "count_option", "check_qa", "check_mechanism", "chec
 
 
 def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: str) -> dict[str, Any]:
-    """Merge keyword options over defaults; unknown names warn and are ignored.
+    """Merge keyword options over defaults; unknown names warn and are ignored (inside
+    :func:`optkin._dryrun.strict_options`, as for problem files, they are errors).
 
     An option whose default is a number (tolerances, counts, limits, seeds) must be given
     a real number >= 0 of magnitude at most ``MAX_ABS`` (inf allowed, e.g. to disable a
@@ -31,6 +33,10 @@ def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: 
     """
     out = dict(defaults)
     for k, v in given.items():
+        if k not in defaults and options_strict():  # problem files: unknown is an error
+            raise MechanismError(
+                f"{where}: unknown option {_show(k)}; known options: {sorted(defaults)}",
+                path=("options", str(k)))
         if k not in defaults:
             warnings.warn(
                 f"{where}: unknown option {_show(k)} ignored; known options: {sorted(defaults)}",

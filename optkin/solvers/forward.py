@@ -8,6 +8,7 @@ import numpy as np
 
 from .._checks import as_float
 from .._checks import show as _show
+from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
@@ -74,6 +75,7 @@ def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinR
         raise MechanismError(
             f"forward: option method must be 'auto', 'ipopt' or 'newton', got {_show(method)}",
             path=("options", "method"))
+    checkpoint()  # validation stops here: every argument is checked
     t0 = timer()
     if method in ("auto", "newton"):
         x, r, nit, ok = newton(model, qa, x0.copy(), tol, max_iter)

@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 from scipy.stats import qmc
 
+from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..mechanism.geometry import wrap_angle
@@ -75,6 +76,7 @@ def inverse(mech: Mechanism, pose: Any, **options: Any) -> SolutionSet:
                              path=("options", "tol"))
     model = get_model(mech)
     T = as_pose(mech, pose)
+    checkpoint()  # validation stops here: every argument is checked
     if mech.kind == "legs":
         return _inverse_legs(model, T, float(opts["tol"]))
     return _inverse_khalil(model, T, opts)

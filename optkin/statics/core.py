@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import numeric
 from .._checks import MAX_ABS, as_int, as_matrix, as_vector, show
+from .._dryrun import checkpoint, computing
 from ..errors import NumericError, StaticsError
 from ..mechanism import Mechanism
 from ..results import SolverStats
@@ -346,9 +347,11 @@ def capability(
     ('optimal', 0.285115)
     """
     opts = _options(options, "capability")
-    sm = static_model(mech, q, float(opts["sing_tol"]))
+    with computing():  # the static model is an input of the checks below
+        sm = static_model(mech, q, float(opts["sing_tol"]))
     lo, hi = limits_of(limits, sm)  # type: ignore[misc]
     D = _directions(directions, sm)
+    checkpoint()  # validation stops here: every argument is checked
     return _capability(sm, lo, hi, D, opts)
 
 
@@ -575,7 +578,8 @@ def capability_polygon(
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 3 <= n <= MAX_DIRECTIONS:
         raise StaticsError(f"n: expected an integer number of directions >= 3 and <= "
                            f"{MAX_DIRECTIONS}, got {show(n)}", path=("n",))
-    sm = static_model(mech, q, float(opts["sing_tol"]))
+    with computing():  # the static model is an input of the checks below
+        sm = static_model(mech, q, float(opts["sing_tol"]))
     names = list(sm.wrench_names)
     if isinstance(plane, (str, bytes)) or not isinstance(plane, Sequence) or not all(
             isinstance(c, str) for c in plane):
@@ -630,7 +634,8 @@ def polytope(mech: Mechanism, q: Any, limits: Any, **options: Any) -> PolytopeRe
     PolytopeResult
     """
     opts = _options(options, "polytope")
-    sm = static_model(mech, q, float(opts["sing_tol"]))
+    with computing():  # the static model is an input of the checks below
+        sm = static_model(mech, q, float(opts["sing_tol"]))
     lo, hi = limits_of(limits, sm)  # type: ignore[misc]
     return _polytope(sm, lo, hi, opts)
 
@@ -737,9 +742,11 @@ def feasible(mech: Mechanism, q: Any, wrench_set: Any, limits: Any, **options: A
     (True, 0.649264)
     """
     opts = _options(options, "feasible")
-    sm = static_model(mech, q, float(opts["sing_tol"]))
+    with computing():  # the static model is an input of the checks below
+        sm = static_model(mech, q, float(opts["sing_tol"]))
     lo, hi = limits_of(limits, sm)  # type: ignore[misc]
     V = _wrench_set(wrench_set, sm)
+    checkpoint()  # validation stops here: every argument is checked
     return _feasible(sm, lo, hi, V, opts)
 
 
@@ -1057,7 +1064,8 @@ def distribute(
     (True, [0.3269, 0.3784, -0.3269, -0.3784])
     """
     opts = _options(options, "distribute")
-    sm = static_model(mech, q, float(opts["sing_tol"]))
+    with computing():  # the static model is an input of the checks below
+        sm = static_model(mech, q, float(opts["sing_tol"]))
     nm = _norm_name(norm)
     try:
         F = as_vector(_ravel(wrench), "wrench", sm.m, error=StaticsError, path=("wrench",))
@@ -1082,6 +1090,7 @@ def distribute(
     if w.shape != (sm.na,) or np.any(w <= 0) or np.any(w < 1 / MAX_ABS):
         raise StaticsError(f"weights: expected {sm.na} positive numbers (in [{1 / MAX_ABS:g}, "
                            f"{MAX_ABS:g}]), got {show(weights)}", path=("weights",))
+    checkpoint()  # validation stops here: every argument is checked
     lo, hi = lh if lh is not None else (np.zeros(sm.na), np.zeros(sm.na))
     # solve on data of magnitude ~1: lambda, tau and the limits scale with the wrench and the
     # weighted limits by a power of two (exact), the answer is scaled back and checked
