@@ -294,6 +294,7 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
     >>> b.all_success, b.x.shape
     (True, (50, 2))
     """
+    deadline = Deadline()
     opts = merge_options(BATCH_DEFAULTS, options, "forward_batch")
     check_mechanism(mech, "forward_batch")
     o = _batch_options(opts)
@@ -312,7 +313,6 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
     path = o["path"]
     guard = (path, o["jump"], o["near"]) if o["guard"] else None
     gchunk = GUARD_CHUNK if guard else None
-    deadline = Deadline()
     if path:
         # the libraries (core, tracker, guard) are compiled in parallel
         model.compile(tracker=(chunk, o["iters"]), guard=gchunk)
@@ -522,6 +522,9 @@ def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback
                  guard=None, deadline: Deadline | None = None) -> BatchResult:
     t0 = timer()
     n, nx = A.shape[0], model.nx
+    if n == 0:
+        return _finish(model, A, np.zeros((0, nx)), np.zeros(0), np.zeros(0, dtype=int), tol,
+                       "newton", t0, {})
     g = None if guess is None or isinstance(guess, KinResult) else np.asarray(guess, dtype=float)
     if g is not None and g.ndim == 2 and g.shape == (n, nx):
         X0 = np.array(g, dtype=float)
