@@ -79,6 +79,7 @@ from ..errors import MechanismError
 from ..limits import (
     MAX_ITERATIONS,
     MAX_THREADS,
+    SAFETY,
     Deadline,
     check_size,
     check_sizes,
@@ -551,8 +552,10 @@ def _opt_auto(opts: dict[str, Any], key: str, where: str, conv) -> Any:
     return conv(v)
 
 
-def _assembly_options(opts: dict[str, Any], model: Model) -> dict[str, Any]:
-    """Every option of assembly_modes converted and checked (MechanismError naming it)."""
+def _assembly_options(opts: dict[str, Any], model: Model, given_time: bool = True
+                      ) -> dict[str, Any]:
+    """Every option of assembly_modes converted and checked (MechanismError naming it); the
+    default time limit is lowered to the time budget, a given one may not exceed it."""
     w = "assembly_modes"
     o: dict[str, Any] = {}
     o["tol"] = _opt_float(opts, "tol", w, positive=True)
@@ -563,6 +566,8 @@ def _assembly_options(opts: dict[str, Any], model: Model) -> dict[str, Any]:
     o["target_upper"] = _opt_float(opts, "target_upper", w)
     tb = time_budget()
     tl = as_float(opts["time_limit"], f"{w}: option time_limit", lo=0.0, finite=False)
+    if not given_time:
+        tl = min(tl, tb)
     if tl > tb:
         raise MechanismError(
             f"{w}: option time_limit = {tl:g} s exceeds the time budget of {tb:g} s "
@@ -748,9 +753,12 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     (:class:`MechanismError` naming the option and its largest allowed value):
     ``width`` costs about 200 + 160 nx bytes per column (nx unknowns; measured 285 bytes
     for a 3-RPR, 1.1 KB for a Stewart-Gough platform) and is at most :data:`MAX_WIDTH`;
-    ``starts`` about 6000 + 400 nx bytes per start, since on a continuum of configurations
-    every start becomes a solution of its own (its column, KinResult and JSON: 1.7 KB +
-    4.7 KB measured for a five-bar); ``rescue`` keeps 4 stalled starts per rescue,
+    without a known ``bound`` (Khalil mechanisms, ``bound=None``), ``starts`` costs about
+    6000 + 400 nx bytes per start, since on a continuum of configurations every start
+    becomes a solution of its own (its column, KinResult and JSON: 1.7 KB + 4.7 KB
+    measured for a five-bar); with a bound the search stops there, so at most
+    bound + width solutions are kept whatever ``starts``; ``rescue`` keeps 4 stalled
+    starts per rescue,
     200 + 8 nx bytes each. ``time_limit`` (also for the IPOPT rescues) may not exceed the
     time budget; ``max_iter`` is at most :data:`optkin.limits.MAX_ITERATIONS`, ``threads``
     at most :data:`optkin.limits.MAX_THREADS`.
@@ -787,14 +795,14 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (numbers.Integral, float)):
         raise MechanismError(f"assembly_modes: seed must be an integer >= 0, got {show(seed)}")
     try:
-        seed = as_int(seed, "assembly_modes: seed", lo=0)
+        seed = as_int(seed, "assembly_modes: seed", lo=0, hi=2**63 - 1)
     except MechanismError:
-        raise MechanismError(f"assembly_modes: seed must be an integer >= 0, got "
-                             f"{show(seed)}") from None
+        raise MechanismError(f"assembly_modes: seed must be an integer >= 0 (below 2**63), "
+                             f"got {show(seed)}") from None
     model = get_model(mech)
     _check_size_of(model, "assembly_modes")
     qa = _qa_arg(model, qa)
-    o = _assembly_options(opts, model)
+    o = _assembly_options(opts, model, "time_limit" in options)
     t_start = timer()
     tol = o["tol"]
     nx = model.nx
@@ -820,13 +828,17 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     # may become a solution of its own, as on a continuum of configurations), then the
     # stalled starts kept for the rescues
     per_col, per_start, per_stalled = _assembly_costs(model)
-    check_sizes(
-        "assembly_modes",
-        ("width", width, per_col, {"hi": MAX_WIDTH, "fit": floor_pow2,
-                                   "unit": "one column of the pool"}),
-        ("starts", budget, per_start, {"unit": "one start, which may become a solution"}),
-        ("rescue", n_rescue, per_stalled * _STALLED_PER_RESCUE,
-         {"lo": 0, "unit": f"{_STALLED_PER_RESCUE} stalled starts kept per rescue"}))
+    sizes = [("width", width, per_col, {"hi": MAX_WIDTH, "fit": floor_pow2,
+                                        "unit": "one column of the pool"}),
+             ("rescue", n_rescue, per_stalled * _STALLED_PER_RESCUE,
+              {"lo": 0, "unit": f"{_STALLED_PER_RESCUE} stalled starts kept per rescue"})]
+    kept = 0.0
+    if bound is None:
+        sizes.append(("starts", budget, per_start,
+                      {"unit": "one start, which may become a solution"}))
+    else:  # the search stops at the bound: at most bound + width solutions are kept
+        kept = SAFETY * per_start * min(budget, bound + width)
+    check_sizes("assembly_modes", *sizes, fixed=kept)
 
     starts = _Starts(model, qa, int(seed), width)
     info: dict[str, Any] = {"bound": bound, "width": width}
@@ -1213,6 +1225,7 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
     >>> r.info["status"], len(r)
     ('optimal', 11)
     """
+    deadline = Deadline()
     opts = merge_options(TRACK_DEFAULTS, options, "track")
     check_mechanism(mech, "track")
     model = get_model(mech)
@@ -1230,7 +1243,6 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
     cond_near = _opt_float(opts, "cond_near", w)
     max_move = _opt_float(opts, "max_correction", w, positive=True)
     contraction = _opt_float(opts, "contraction", w)
-    deadline = Deadline()
     scale = model.x_scale
     t0 = timer()
     x0 = parse_guess(model, P[0], guess)
