@@ -37,7 +37,9 @@ from ..mechanism import Mechanism
 from ..model import get_model
 from .continuation import (
     DEFAULT_STEP,
+    MIN_POINTS,
     SingularCurves,
+    _cell_cost,
     _check_mech_size,
     _full_from_x,
     _mapping_arg,
@@ -702,12 +704,15 @@ def _region_cost(model: Any) -> float:
 
 
 def _qa_grid_cost(mech: Mechanism, where: str, n: int) -> float:
-    """Check ``qa_grid`` against the memory budget; the bytes it reserves (with SAFETY)."""
+    """Check ``qa_grid`` against the memory budget, with room for a seeding chart of the
+    default size and MIN_POINTS traced points (``grid`` is checked next, with the masks
+    reserved); the bytes it reserves (with SAFETY)."""
     if not (mech.platform == "planar_point" and len(mech.legs) == 2):
         return 0.0  # no joint-space masks for this mechanism
+    rest = SAFETY * (_cell_cost(mech) * 32.0**2 + _region_cost(get_model(mech)) * MIN_POINTS)
     a, b = _COST_QA_CELL
     per = a + b * _MASKS_PER_MODE * len(leg_working_modes(mech))
-    check_size(where, "qa_grid", n, per, power=2, lo=2,
+    check_size(where, "qa_grid", n, per, power=2, lo=2, fixed=rest,
                unit="one cell of the joint-space masks")
     return SAFETY * per * n * n
 

@@ -1062,6 +1062,7 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     ``point_cost`` bytes per traced point, ``reserved`` bytes being spent elsewhere by the
     caller; ``max_steps=None``: the default, lowered to what the budget allows)."""
     t0 = time.perf_counter()
+    deadline = Deadline()
     if not isinstance(mech, Mechanism):
         raise MechanismError(f"expected an optkin Mechanism, got {type(mech).__name__}")
     grid = check_number("grid", grid, integer=True, low=2, optional=True)
@@ -1148,16 +1149,19 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     # memory, before anything is allocated: the seeding chart, then the traced points
     if budget is None:
         cell = _cell_cost(mech)
-        check_size(where, "grid", n, cell, power=2, lo=2, fixed=reserved,
-                   unit=f"one seeding point of {_n_combos(mech)} posture combination(s)")
         per_point = _point_cost(model) if point_cost is None else point_cost
+        # the chart leaves room for MIN_POINTS traced points at least
+        check_size(where, "grid", n, cell, power=2, lo=2,
+                   fixed=reserved + SAFETY * per_point * MIN_POINTS,
+                   unit=f"one seeding point of {_n_combos(mech)} posture combination(s), "
+                   f"{MIN_POINTS} traced points being kept free")
         spent = reserved + SAFETY * cell * n * n
         if user_steps:
             check_size(where, "max_steps", max_steps, 2 * per_point, fixed=spent,
                        unit="two traced points (a curve runs max_steps each way)")
         else:
             max_steps = max(1, min(DEFAULT_MAX_STEPS, largest_size(2 * per_point, fixed=spent)))
-        budget = _Budget(Deadline(), max(2, int((memory_budget() - spent)
+        budget = _Budget(deadline, max(2, int((memory_budget() - spent)
                                                  / (SAFETY * per_point))))
     elif not user_steps:
         max_steps = DEFAULT_MAX_STEPS
@@ -1367,6 +1371,9 @@ def check_number(name: str, v: Any, *, integer: bool = False, low: float = 0.0,
 
 #: Default (and, when not given, budget-lowered) ``max_steps`` of :func:`singular_curves`.
 DEFAULT_MAX_STEPS = 20000
+#: Traced points the memory check of ``grid`` keeps room for (the curves of the bundled
+#: problems take 300 to 3000).
+MIN_POINTS = 4096
 #: Range of the continuation ``step`` (scaled units): below, curves take millions of
 #: points; above, a step jumps across the mechanism.
 MIN_STEP, MAX_STEP = 1e-6, 1.0

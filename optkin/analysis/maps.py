@@ -142,6 +142,7 @@ def singularity_map(
     from ..solvers import forward, inverse
     from ..solvers.common import check_mechanism
 
+    deadline = Deadline()
     check_mechanism(mech, "singularity_map")
     u, v = _axis_values("u", u), _axis_values("v", v)
     check_size("singularity_map", "len(u) * len(v)", u.size * v.size, _COST_MAP_POINT, lo=4,
@@ -150,7 +151,6 @@ def singularity_map(
     fixed = _fixed_arg(fixed)
     ax_given = _axes_arg(axes)
     guess = _guess_arg(guess)
-    deadline = Deadline()
     stopped: str | None = None
     vals = {k: np.full((v.size, u.size), np.nan) for k in MEASURES}
     if mech.kind == "legs":
