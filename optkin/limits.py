@@ -19,10 +19,12 @@ TIME_BUDGET : float
     Seconds a call without a ``time_limit`` option of its own may spend in its loops
     (continuation, path tracking, batch fallbacks, map sampling): 600 s by default,
     ``OPTKIN_TIME_BUDGET`` overrides it. When it runs out the call returns what it has with
-    ``success=False`` and status ``"time_limit"``; the ``time_limit`` option of
-    :func:`optkin.assembly_modes` may not exceed it. A single native call (one mapped
-    CasADi evaluation, one IPOPT solve) is not interrupted, but its size is bounded by the
-    memory budget.
+    ``success=False`` and status ``"time_limit"`` (``"iteration_limit"`` for
+    :func:`optkin.track` and :func:`optkin.forward_batch`, whose statuses are those of
+    :data:`optkin.results.STATUS`); the ``time_limit`` option of
+    :func:`optkin.assembly_modes` defaults to at most the budget and may not exceed it.
+    A single native call (one mapped CasADi evaluation, one IPOPT solve) is not
+    interrupted, but its size is bounded by the memory budget.
 
 Counts that do not allocate but multiply the work (iterations, unrolled Newton steps,
 threads) have fixed upper bounds, :data:`MAX_ITERATIONS`, :data:`MAX_UNROLL` and
