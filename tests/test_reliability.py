@@ -37,8 +37,9 @@ MALFORMED = {
     "hugeint.toml": "task[0].pose[0]",
     "hugeint5000.toml": "5000 digits",
     "jacobians_hang.toml": "platform points coincide",
-    "grid_unbounded.toml": "grid",
 }
+#: reproductions whose file is valid but whose task must fail fast with a clear error
+TASK_ERRORS = {"grid_unbounded.toml": "grid"}
 
 
 def optkin(*args: str, cwd: Path = ROOT, timeout: float = 300, env: dict | None = None
@@ -108,7 +109,7 @@ def test_malformed_files_fail_alone_and_good_results_equal_a_clean_run(tmp_path:
     for name in SMALL:
         write(good / name, (PROBLEMS / name).read_text())
         write(mixed / name, (PROBLEMS / name).read_text())
-    for name in MALFORMED:
+    for name in [*MALFORMED, *TASK_ERRORS]:
         shutil.copy(REPRO / name, mixed / name)
     shutil.copy(REPRO / "expr_abort_run" / "b_bad.toml", mixed / "b_bad.toml")
     write(mixed / "minus.toml",  # "-" * 100000 + "1": a MemoryError in the parser before
@@ -133,6 +134,9 @@ def test_malformed_files_fail_alone_and_good_results_equal_a_clean_run(tmp_path:
         assert name in by_problem, name
         assert by_problem[name][0]["status"] == "invalid", (name, by_problem[name])
         assert needle in by_problem[name][0]["message"], (name, by_problem[name][0]["message"])
+    for name, needle in TASK_ERRORS.items():
+        (row,) = by_problem[name]
+        assert row["status"] == "error" and needle in row["message"], row
     a, b = results(tmp_path / "clean"), results(tmp_path / "out")
     for name in SMALL:
         key = name.replace(".toml", ".json")
