@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ._dryrun import checkpoint
 from .errors import MechanismError
 from .limits import check_size
 from .mechanism import Mechanism
@@ -39,6 +40,7 @@ def chain_points(mech: Mechanism, r: KinResult) -> list[np.ndarray]:
         raise MechanismError(f"r: expected a KinResult (from optkin.forward, inverse, "
                              f"assembly_modes, track), got {type(r).__name__}")
     check_result_of(mech, r, "r")
+    checkpoint()  # validation stops here: every argument is checked
     lines: list[np.ndarray] = []
     if mech.kind == "khalil":
         qmap = dict(zip(mech.joint_names, r.q))
@@ -111,6 +113,7 @@ def draw(
             f"inverse, assembly_modes, track), got {type(results).__name__}")
     for r in rs:
         check_result_of(mech, r, "results")
+    checkpoint()  # validation stops here: every argument is checked
     plt = _mpl()
     rs = [r for r in rs if np.all(np.isfinite(r.q))]
     n = max(1, len(rs))

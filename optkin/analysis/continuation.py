@@ -38,6 +38,7 @@ import casadi as ca
 import numpy as np
 
 from .._checks import MAX_ABS, as_float, as_int, as_matrix, as_vector
+from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..limits import SAFETY, Deadline, check_size, largest_size, memory_budget, show
 from ..mechanism import Mechanism
@@ -1172,17 +1173,20 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     n_seeds = 0
     messages = []
     pvals = np.array([fixed_map[i] for i in fixed_idx])
-    for cond, lim in conds:
+    # the augmented systems check that each condition makes a curve in this section
+    systems = [augmented_system(mech, cond, fixed_idx) for cond, _ in conds]
+    if mech.kind != "legs" and any(c == "parallel" for c, _ in conds) and (
+            model.na != 2 or fixed_map):
+        raise MechanismError(
+            f"{mech.name}: parallel curves of a Khalil mechanism need 2 actuated "
+            "joints and no section (fixed); 1-DoF chains: kind='closure'")
+    checkpoint()  # validation stops here: every argument is checked
+    for (cond, lim), sys in zip(conds, systems):
         if budget.exhausted():
             break
-        sys = augmented_system(mech, cond, fixed_idx)
         if mech.kind == "legs":
             seeds_v = _seeds_legs(sys, cond, fixed_map, lim, n, bounds_full)
         elif cond == "parallel":
-            if model.na != 2 or fixed_map:
-                raise MechanismError(
-                    f"{mech.name}: parallel curves of a Khalil mechanism need 2 actuated "
-                    "joints and no section (fixed); 1-DoF chains: kind='closure'")
             seeds_v = _seeds_khalil_parallel(mech, names, max(8, n // 2), n, hmax, budget)
         else:
             seeds_v = _seeds_khalil(sys, fixed_map, n, rng, budget)

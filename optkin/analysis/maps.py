@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import as_float, as_matrix, as_vector
+from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..limits import Deadline, check_size, show
 from ..mechanism import Mechanism
@@ -166,6 +167,7 @@ def singularity_map(
                 raise MechanismError(f"fixed: {show(k)} is not a task coordinate ({names})")
             base[names.index(k)] = val
         mode = _mode_arg(working_mode, len(mech.legs))
+        checkpoint()  # validation stops here: every argument is checked
         for i, vv in enumerate(v):
             if stopped:
                 break
@@ -203,6 +205,7 @@ def singularity_map(
             if k not in names:
                 raise MechanismError(f"fixed: {show(k)} is not an active joint ({names})")
             base[names.index(k)] = val
+        checkpoint()  # validation stops here: every argument is checked
         prev_row = guess
         for i, vv in enumerate(v):
             if stopped:

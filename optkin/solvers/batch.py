@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import as_float, as_int, as_matrix, as_vector
+from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..limits import MAX_ITERATIONS, MAX_THREADS, MAX_UNROLL, Deadline, check_sizes, show
 from ..mechanism import Mechanism
@@ -309,6 +310,13 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
         ("len(QA)", A.shape[0], _row_cost(model),
          {"lo": 0, "unit": "one row: its solution, checks and JSON"}))
     guess = _guess_arg(guess)
+    if not o["path"] and guess is not None and A.shape[0]:  # one guess for every row
+        g = guess if isinstance(guess, KinResult) else np.asarray(guess)
+        if not (isinstance(g, np.ndarray) and g.shape == (A.shape[0], model.nx)):
+            parse_guess(model, check_qa(model, A[0]), guess)
+    elif guess is not None and A.shape[0]:
+        parse_guess(model, check_qa(model, A[0]), guess)
+    checkpoint()  # validation stops here: every argument is checked
     tol = o["tol"]
     path = o["path"]
     guard = (path, o["jump"], o["near"]) if o["guard"] else None

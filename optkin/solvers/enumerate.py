@@ -75,6 +75,7 @@ import numpy as np
 from scipy.stats import chi2, qmc
 
 from .._checks import MAX_ABS, as_float, as_int, as_matrix, as_vector
+from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..limits import (
     MAX_ITERATIONS,
@@ -839,6 +840,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     else:  # the search stops at the bound: at most bound + width solutions are kept
         kept = SAFETY * per_start * min(budget, bound + width)
     check_sizes("assembly_modes", *sizes, fixed=kept)
+    checkpoint()  # validation stops here: every argument is checked
 
     starts = _Starts(model, qa, int(seed), width)
     info: dict[str, Any] = {"bound": bound, "width": width}
@@ -1243,9 +1245,10 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
     cond_near = _opt_float(opts, "cond_near", w)
     max_move = _opt_float(opts, "max_correction", w, positive=True)
     contraction = _opt_float(opts, "contraction", w)
+    x0 = parse_guess(model, P[0], guess)
+    checkpoint()  # validation stops here: every argument is checked
     scale = model.x_scale
     t0 = timer()
-    x0 = parse_guess(model, P[0], guess)
     x, r, nit, ok = newton(model, P[0], x0, tol, 50)
     pts: list[KinResult] = []
     dets: list[float] = []
@@ -1474,6 +1477,8 @@ def working_modes(mech: Mechanism, pose: Any = None) -> WorkingModes:
             "actuated joint per independent leg, seed 004); describe it with "
             "Mechanism.from_legs"
         )
+    if pose is None:
+        checkpoint()  # validation stops here: every argument is checked
     signs = [_B_SIGNS.get(leg.type, (-1, 1)) for leg in mech.legs]
     modes = [tuple(int(v) for v in m) for m in itertools.product(*signs)]
     wm = WorkingModes(modes, [leg.type for leg in mech.legs])
