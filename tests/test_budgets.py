@@ -366,3 +366,27 @@ def test_huge_mechanisms_and_arguments_name_the_culprit():
         optkin.forward_batch(m, [[1.0, 10**400]])
     with pytest.raises(MechanismError, match="iters"):
         optkin.forward_batch(m, [[1.0, 2.0]], iters=10**6)
+
+
+def test_validation_stops_at_the_checkpoint_after_the_size_checks():
+    """Problem-file validation runs the same checks: a size beyond the budget is refused,
+    valid arguments reach the checkpoint without doing the work."""
+    from optkin._dryrun import Checked, validating
+
+    five = M.five_bar(2.0, 1.5, 2.0, 2.0, 1.5)
+    cw = M.five_bar(9, 8, 5, 5, 8)
+    P = np.column_stack([np.linspace(1.2, 1.4, 5), np.full(5, 1.9)])
+    with validating():
+        with pytest.raises(MechanismError, match=r"option grid = 1000000 .* largest allowed grid"):
+            optkin.workspace(cw, grid=10**6)
+        with pytest.raises(MechanismError, match=r"^guess: expected the unknowns x"):
+            optkin.track(five, P, [1, 2, 3, 4, 5])
+        for call in (lambda: optkin.assembly_modes(five, [1.2, 1.9]),
+                     lambda: optkin.track(five, P, [0.9, 2.3]),
+                     lambda: optkin.forward_batch(five, P),
+                     lambda: optkin.working_modes(five),
+                     lambda: optkin.singular_curves(cw),
+                     lambda: optkin.aspects(cw),
+                     lambda: optkin.workspace(cw)):
+            with pytest.raises(Checked):
+                call()
