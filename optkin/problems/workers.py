@@ -209,10 +209,13 @@ class _Worker:
         _LIVE.add(self)
 
     def _read(self) -> None:
+        """Feed the worker's messages to the queue; this thread owns (and closes) ``rfd``."""
         while True:
             try:
                 msg = _recv(self.rfd)
             except (EOFError, OSError, pickle.UnpicklingError, struct.error):
+                with contextlib.suppress(OSError):
+                    os.close(self.rfd)
                 self.events.put((self, None))
                 return
             self.events.put((self, msg))
@@ -230,15 +233,19 @@ class _Worker:
         with contextlib.suppress(subprocess.TimeoutExpired):
             self.proc.wait(timeout=10)
 
-    def close(self) -> None:
+    def close(self, wait: float = 0.0) -> None:
+        """Tell the worker to exit (it ends by itself; ``wait`` seconds before a kill)."""
+        if self.wfd < 0:  # closed already
+            return
         self.send(("exit",))
-        try:
-            self.proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            self.kill()
-        for fd in (self.wfd, self.rfd):
-            with contextlib.suppress(OSError):
-                os.close(fd)
+        if wait:
+            try:
+                self.proc.wait(timeout=wait)
+            except subprocess.TimeoutExpired:
+                self.kill()
+        with contextlib.suppress(OSError):  # the child sees EOF; the reader closes rfd
+            os.close(self.wfd)
+        self.wfd = -1
         self.stderr.close()
 
     def death_reason(self) -> str:
@@ -273,12 +280,18 @@ class _Worker:
 _LIVE: weakref.WeakSet[_Worker] = weakref.WeakSet()
 
 
+#: Environment variables that change while a process runs without mattering to a worker.
+_VOLATILE = ("PYTEST_CURRENT_TEST",)
+
+
 def _env_key(env: dict[str, str]) -> tuple:
-    return tuple(sorted(env.items()))
+    return tuple(sorted((k, v) for k, v in env.items() if k not in _VOLATILE))
 
 
 _IDLE: dict[tuple, list[_Worker]] = {}
 _IDLE_LOCK = threading.Lock()
+#: Most idle workers kept in all (each holds a Python process with optkin loaded).
+MAX_IDLE = 4
 
 
 def _worker_env(threads: int | None) -> dict[str, str]:
@@ -305,12 +318,20 @@ def _checkin(w: _Worker, env: dict[str, str], keep: int) -> None:
     if w.dead or w.proc.poll() is not None:
         w.close()
         return
+    evicted: list[_Worker] = []
     with _IDLE_LOCK:
         pool = _IDLE.setdefault(_env_key(env), [])
         if len(pool) < keep:
             pool.append(w)
-            return
-    w.close()
+            w = None
+        # beyond MAX_IDLE in all, the workers of other environments go first
+        while sum(map(len, _IDLE.values())) > MAX_IDLE:
+            key = next(k for k, v in _IDLE.items() if v and (v is not pool or len(_IDLE) == 1))
+            evicted.append(_IDLE[key].pop(0))
+            if not _IDLE[key]:
+                del _IDLE[key]
+    for x in evicted + ([w] if w is not None else []):
+        x.close()
 
 
 @atexit.register
@@ -392,6 +413,9 @@ def run_jobs(
 
     try:
         while pending or any(w.job is not None for w in workers):
+            for w in workers:
+                if w.dead:
+                    w.close()
             workers = [w for w in workers if not w.dead]
             while len(workers) < n_workers and len(workers) < len(pending) + sum(
                     w.job is not None for w in workers):
