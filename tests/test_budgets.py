@@ -390,3 +390,28 @@ def test_validation_stops_at_the_checkpoint_after_the_size_checks():
                      lambda: optkin.workspace(cw)):
             with pytest.raises(Checked):
                 call()
+
+
+def test_the_largest_accepted_inverse_and_statics_grids_stop_at_the_time_budget(monkeypatch):
+    """inverse with the largest accepted number of starts (a Khalil multi-start took 27 min)
+    and a wrench-feasibility grid of the largest accepted size (10^6 poses) stop at the time
+    budget with success False, their result saying so."""
+    from optkin import statics
+    from optkin.solvers.inverse import MAX_STARTS
+    from optkin.statics.core import MAX_GRID
+
+    sr = M.sr400()
+    q = optkin.forward(sr, [0.3, -0.4, 0.2, 0.5, 0.4, 0.6], guess=[np.pi / 2 + 1, -1, np.pi + 1])
+    monkeypatch.setenv("OPTKIN_TIME_BUDGET", "1")
+    t0 = time.perf_counter()
+    r = optkin.inverse(sr, q.pose, starts=MAX_STARTS)
+    assert time.perf_counter() - t0 < 15
+    assert r.info["success"] is False and r.info["status"] == "time_limit"
+    assert "time budget of 1 s" in r.info["message"]
+    m = M.rpr3(base=[[0, 0], [4, 0], [0, 3]], platform=[[-0.5, -0.3], [0.5, -0.3], [0, 0.4]])
+    t0 = time.perf_counter()
+    w = statics.wrench_feasible_workspace(m, [0.0, -1.0, 0.0], 10.0, grid=MAX_GRID,
+                                          fixed=[0.0, 0.0, 0.2])
+    assert time.perf_counter() - t0 < 15
+    assert not w.success and w.status == "time_limit"
+    assert "not computed" in w.message and w.point_status.count("not computed") > 0

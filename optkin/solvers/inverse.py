@@ -18,6 +18,7 @@ from scipy.stats import qmc
 
 from .._dryrun import checkpoint
 from ..errors import MechanismError
+from ..limits import Deadline
 from ..mechanism import Mechanism
 from ..mechanism.geometry import wrap_angle
 from ..mechanism.legs import leg_inverse
@@ -189,8 +190,12 @@ def _inverse_system(model: Model) -> dict[str, Any]:
 _MAPS: dict[tuple[str, int], tuple[ca.Function, ca.Function]] = {}
 
 
-def _multistart(step, params: np.ndarray, lo, hi, n: int, iters: int, seed: int):
-    """Batched Newton from n Sobol starts in the box [lo, hi]; returns (Z, residuals)."""
+def _multistart(step, params: np.ndarray, lo, hi, n: int, iters: int, seed: int,
+                deadline: Deadline | None = None):
+    """Batched Newton from n Sobol starts in the box [lo, hi]; returns (Z, residuals).
+
+    The iterations stop early when ``deadline`` expires (the residuals say what converged).
+    """
     dim = len(lo)
     U = qmc.Sobol(dim, scramble=True, seed=seed).random(n)
     Z = (lo + U * (hi - lo)).T
@@ -202,6 +207,8 @@ def _multistart(step, params: np.ndarray, lo, hi, n: int, iters: int, seed: int)
     fmap = fmap[1]
     P = np.tile(params, (1, n))
     for _ in range(iters):
+        if deadline is not None and deadline.expired():
+            break
         Zn, _ = fmap(Z, P)
         Zn = np.array(Zn)
         good = np.all(np.isfinite(Zn), axis=0)
@@ -234,21 +241,25 @@ def _inverse_khalil(model: Model, T: np.ndarray, opts: dict[str, Any]) -> Soluti
     n, iters, seed = int(opts["starts"]), int(opts["iters"]), int(opts["seed"])
     tol = float(opts["tol"])
     t0 = timer()
+    deadline = Deadline()  # the time budget of one call (optkin.limits)
     lo = np.where(revolute, -np.pi, -2 * model.length)
     hi = np.where(revolute, np.pi, 2 * model.length)
     candidates: list[np.ndarray] = []
     runs = 0
     if "stage1" in sysf:
         path, off = sysf["path"], sysf["off"]
-        Zp, r1 = _multistart(sysf["stage1"], T, lo[path], hi[path], n, iters, seed)
+        Zp, r1 = _multistart(sysf["stage1"], T, lo[path], hi[path], n, iters, seed, deadline)
         runs += n
         ok1 = np.flatnonzero(r1 <= 1e3 * tol)
         Zp = Zp[:, ok1]
         Zp[revolute[path]] = wrap_angle(Zp[revolute[path]])
         for j in distinct(Zp, revolute[path], scale[path]):
+            if deadline.expired():
+                break
             zp = Zp[:, j]
             n2 = max(32, n // 4)
-            Zo, r2 = _multistart(sysf["stage2"], zp[:, None], lo[off], hi[off], n2, iters, seed + 1)
+            Zo, r2 = _multistart(sysf["stage2"], zp[:, None], lo[off], hi[off], n2, iters,
+                                 seed + 1, deadline)
             runs += n2
             for i in np.flatnonzero(r2 <= 1e3 * tol):
                 qv = np.empty(nq)
@@ -256,7 +267,7 @@ def _inverse_khalil(model: Model, T: np.ndarray, opts: dict[str, Any]) -> Soluti
                 qv[off] = Zo[:, i]
                 candidates.append(qv)
     else:
-        Q, r = _multistart(sysf["joint"], T, lo, hi, n, iters, seed)
+        Q, r = _multistart(sysf["joint"], T, lo, hi, n, iters, seed, deadline)
         runs += n
         candidates = [Q[:, i] for i in np.flatnonzero(r <= 1e3 * tol)]
     converged = len(candidates)
@@ -289,4 +300,7 @@ def _inverse_khalil(model: Model, T: np.ndarray, opts: dict[str, Any]) -> Soluti
             "outside_limits": outside,
             "message": f"{len(out)} postures from {runs} starts ({converged} converged; {method})"
             + (f"; {outside} outside the joint limits left out" if outside else "")}
+    if deadline.expired():  # the enumeration was cut short: say so, never claim success
+        info.update(success=False, status="time_limit",
+                    message=deadline.message("inverse") + f"; {info['message']}")
     return SolutionSet(out, "postures", info, seed=seed)

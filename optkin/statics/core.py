@@ -18,6 +18,7 @@ from .. import numeric
 from .._checks import MAX_ABS, as_int, as_matrix, as_vector, show
 from .._dryrun import checkpoint, computing
 from ..errors import NumericError, StaticsError
+from ..limits import Deadline
 from ..mechanism import Mechanism
 from ..results import SolverStats
 from ..solvers.common import merge_options
@@ -939,24 +940,34 @@ def wrench_feasible_workspace(
     N = P.shape[0]
     margin = np.full(N, np.nan)
     feas = np.zeros(N, dtype=bool)
-    pstat: list[str] = ["unreachable"] * N
+    pstat: list[str] = ["not computed"] * N
     t0 = time.perf_counter()
-    sms: dict[int, StaticModel] = {}
-    for i in range(N):
-        sols = inverse(mech, P[i])
-        sol = None
-        if working_mode is not None:
-            wm = tuple(int(v) for v in working_mode)
-            sol = next((s for s in sols if s.working_mode == wm), None)
-        elif len(sols) > posture:
-            sol = sols[posture]
-        if sol is not None and sol.success:
-            sms[i] = static_model(mech, sol, float(opts["sing_tol"]))
+    deadline = Deadline()  # the time budget of one call (optkin.limits)
+    n = max(1, min(int(opts.get("chunk", 64)), N))
     nsolve = 0
-    if sms:
-        first = next(iter(sms.values()))
-        lo, hi = limits_of(limits, first)  # type: ignore[misc]
-        V = _wrench_set(wrench_set, first)
+    lo = hi = V = None
+    # poses in chunks: the static models of one chunk at a time (memory stays bounded)
+    for c0 in range(0, N, n):
+        if deadline.expired():
+            break
+        sms: dict[int, StaticModel] = {}
+        for i in range(c0, min(N, c0 + n)):
+            pstat[i] = "unreachable"
+            sols = inverse(mech, P[i])
+            sol = None
+            if working_mode is not None:
+                wm = tuple(int(v) for v in working_mode)
+                sol = next((s for s in sols if s.working_mode == wm), None)
+            elif len(sols) > posture:
+                sol = sols[posture]
+            if sol is not None and sol.success:
+                sms[i] = static_model(mech, sol, float(opts["sing_tol"]))
+        if not sms:
+            continue
+        if V is None:
+            first = next(iter(sms.values()))
+            lo, hi = limits_of(limits, first)  # type: ignore[misc]
+            V = _wrench_set(wrench_set, first)
         todo = []
         for i, sm in sms.items():
             if sm.singularity == "undefined":
@@ -968,31 +979,37 @@ def wrench_feasible_workspace(
                 margin[i], pstat[i] = -np.inf, "singular"
             else:
                 todo.append(i)
-        n = max(1, min(int(opts.get("chunk", 64)), len(todo))) if todo else 1
-        for c0 in range(0, len(todo), n):
-            idx = todo[c0:c0 + n]
-            mus, st = _margins_batch([sms[i] for i in idx], lo, hi, V, n, opts)
-            nsolve += 1
-            for i, mu, sti in zip(idx, mus, st):
-                if sti == "fallback":  # the batch failed: solve this pose alone
-                    r = _feasible(sms[i], lo, hi, V, opts)
-                    nsolve += 1
-                    mu = r.margin
-                    sti = "singular" if r.status == "singular" else (
-                        r.status if not r.success else "ok")
-                margin[i] = mu
-                feas[i] = bool(mu >= -1e-9)
-                pstat[i] = ("feasible" if feas[i] else "infeasible") if sti == "ok" else sti
+        if not todo:
+            continue
+        mus, st = _margins_batch([sms[i] for i in todo], lo, hi, V, n, opts)
+        nsolve += 1
+        for i, mu, sti in zip(todo, mus, st):
+            if sti == "fallback":  # the batch failed: solve this pose alone
+                r = _feasible(sms[i], lo, hi, V, opts)
+                nsolve += 1
+                mu = r.margin
+                sti = "singular" if r.status == "singular" else (
+                    r.status if not r.success else "ok")
+            margin[i] = mu
+            feas[i] = bool(mu >= -1e-9)
+            pstat[i] = ("feasible" if feas[i] else "infeasible") if sti == "ok" else sti
     dt = time.perf_counter() - t0
     nreach = sum(1 for s in pstat if s != "unreachable")
-    nerr = sum(1 for s in pstat if s not in ("feasible", "infeasible", "unreachable", "singular"))
+    nleft = sum(1 for s in pstat if s == "not computed")
+    nerr = sum(1 for s in pstat if s not in ("feasible", "infeasible", "unreachable", "singular",
+                                             "not computed"))
+    nreach -= nleft
     msg = (f"{int(feas.sum())} of {nreach} reachable poses feasible ({N} poses, "
-           f"{N - nreach} unreachable)")
+           f"{N - nreach - nleft} unreachable)")
     if nerr:
         msg += f"; the LP failed at {nerr} poses"
+    status = "optimal" if nerr == 0 else "error"
+    if nleft:
+        status = "time_limit"
+        msg = deadline.message("wrench_feasible_workspace") + f" ({nleft} poses not computed); {msg}"
     res = WorkspaceResult(
         poses=P, margin=margin, feasible=feas, point_status=pstat, grid_shape=grid_shape,
-        axes=tnames[:2], success=nerr == 0, status="optimal" if nerr == 0 else "error",
+        axes=tnames[:2], success=nerr == 0 and not nleft, status=status,
         message=msg, task_names=tnames,
         stats=SolverStats("HIGHS", 0.0, dt, nsolve, "", {"poses": N, "lp_solves": nsolve}),
     )
