@@ -524,3 +524,103 @@ def test_idle_workers_are_reused_and_closed(tmp_path: Path) -> None:
     assert first and first == second
     wk._close_idle()
     assert not wk._IDLE
+
+
+# ---------------------------------------------------------------------------
+# fuzz: mutated bundled problems, run end to end
+# ---------------------------------------------------------------------------
+
+_JUNK = [10**400 // 10**200, -1, 0, 1e150, -1e149, 3.5, 1e-300, "x", "pi/0", "", True, [],
+         [1.0] * 40, [[1.0, 2.0]] * 3, {"a": 1.0}, 2**62, 10**6]
+
+
+_NUMBERS = [1e150, -1e149, 0.0, -1.0, 1e-300, 3.5, 1e6, 1e100, -7.25, 2.0**62]
+
+
+def _get(doc, path):
+    for k in path:
+        doc = doc[k]
+    return doc
+
+
+def _mutations():
+    import tomllib
+    from hypothesis import strategies as st
+
+    docs = [tomllib.loads((PROBLEMS / n).read_text())
+            for n in ("five_bar.toml", "rpr3.toml", "four_bar.toml", "statics_rpr3.toml",
+                      "five_bar_aspects.toml", "assembly_modes_rpr3.toml", "sr400_table.toml")]
+
+    def leaves(node, prefix=()):
+        out = [prefix] if prefix else []
+        if isinstance(node, dict):
+            for k, v in node.items():
+                out += leaves(v, prefix + (k,))
+        elif isinstance(node, list):
+            for i, v in enumerate(node):
+                out += leaves(v, prefix + (i,))
+        return out
+
+    @st.composite
+    def mutated(draw):
+        import copy
+
+        doc = copy.deepcopy(draw(st.sampled_from(docs)))
+        numeric_only = draw(st.booleans())  # half the time: files the schema accepts
+        for _ in range(draw(st.integers(1, 3))):
+            paths = [p for p in leaves(doc) if p and p[0] != "schema_version"]
+            if numeric_only:
+                paths = [p for p in paths if isinstance(_get(doc, p), float)]
+            if not paths:
+                break
+            path = draw(st.sampled_from(paths))
+            node = _get(doc, path[:-1])
+            junk = _NUMBERS if numeric_only else _JUNK
+            node[path[-1]] = copy.deepcopy(draw(st.sampled_from(junk)))  # no shared lists
+        return doc
+
+    return mutated()
+
+
+def _fuzz_runs(n_examples: int, tmp_path_factory) -> None:
+    from hypothesis import HealthCheck, given, settings
+    from test_problems import to_toml
+
+    @settings(max_examples=n_examples, deadline=None, derandomize=True,
+              suppress_health_check=list(HealthCheck))
+    @given(_mutations())
+    def run_one(doc):
+        d = tmp_path_factory.mktemp("fuzz")
+        try:
+            text = to_toml(doc)
+        except (TypeError, ValueError):  # not representable as TOML: nothing to run
+            return
+        (d / "p" ).mkdir()
+        (d / "p" / "m.toml").write_text(text)
+        t0 = time.perf_counter()
+        report = rn.run_paths([d / "p"], out=d / "o", pictures=False, time_limit=30.0)
+        assert time.perf_counter() - t0 < 120
+        assert not report.crashed, report.crashed  # only the file's or a task's own errors
+        assert (d / "o" / "summary.csv").exists()
+        for _, t in report.tasks:
+            assert t["status"] in ("ok", "failed", "error"), t
+            if t["status"] == "error":  # our errors, never an unexpected exception
+                assert t["message"].split(":")[0] in (
+                    "MechanismError", "StaticsError", "NumericError", "ValueError",
+                    "ProblemFileError") or "time limit" in t["message"], t["message"]
+        for msg in report.invalid.values():
+            assert msg.startswith("m.toml: "), msg
+
+    run_one()
+
+
+def test_fuzz_problem_files_end_to_end(tmp_path_factory) -> None:
+    """Mutated bundled problems (huge, tiny, wrong-typed values anywhere) run through the
+    workers: only the file's own error or task errors of the project's kinds, no crash of
+    the run, every call within its time bound."""
+    _fuzz_runs(12, tmp_path_factory)
+
+
+@pytest.mark.slow
+def test_fuzz_problem_files_end_to_end_slow(tmp_path_factory) -> None:
+    _fuzz_runs(200, tmp_path_factory)
