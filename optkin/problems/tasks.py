@@ -249,7 +249,7 @@ def _q_of(mech: Any, task: Any, ctx: TaskContext) -> Any:
     """Joint values from ``task.q``, or solved from ``task.qa`` by forward kinematics."""
     q = getattr(task, "q", None)
     if q is not None:
-        return _vector(q, mech.joint_names, getattr(mech, "home", None))
+        return _guess(mech, q)  # a partial table takes the other joints at home
     qa = getattr(task, "qa", None)
     if qa is not None:
         with computing():  # the configuration is an input of the task, also when validating
