@@ -13,7 +13,8 @@ from .._checks import as_float, as_int, as_vector
 from .._checks import show as _show
 from ..errors import MechanismError
 from .khalil import KhalilTable
-from .legs import PLATFORMS, Leg, validate_legs
+from .legs import Leg, validate_legs
+from .platforms import PLATFORMS
 
 __all__ = ["Mechanism", "TASK_COMPONENTS"]
 
@@ -57,7 +58,7 @@ class Mechanism:
     __slots__ = (
         "name", "kind", "joint_names", "actuated", "revolute", "dof", "planar", "table",
         "end_effector", "task", "legs", "platform", "home", "params", "redundant", "limits", "_spec",
-        "_key",
+        "reduced", "_key", "_topology", "_geometry",
         "__weakref__",
     )
 
@@ -153,6 +154,7 @@ class Mechanism:
         m.task = task
         m.planar = False
         m.redundant = False
+        m.reduced = True
         m.legs = ()
         m.platform = None
         m.params = dict(table.params)
@@ -183,14 +185,18 @@ class Mechanism:
         home: Sequence[float] | None = None,
         params: Mapping[str, Any] | None = None,
         redundant: bool = False,
+        reduced: bool = True,
     ) -> Mechanism:
         """A parallel platform from its legs (see :mod:`optkin.mechanism.legs`).
 
         Parameters
         ----------
-        legs : sequence of mappings
-            ``{"type": "RPR", "base": [x, y], "platform": [x, y]}``, with ``lengths`` for
-            RRR/RUS legs and ``axis``/``arm`` for RUS legs.
+        legs : sequence of mappings or Leg
+            ``{"type": "RPR", "base": [x, y], "platform": [x, y]}`` (a type of
+            :data:`optkin.mechanism.legs.LEG_TYPES` with its keys, e.g. ``lengths`` for
+            RRR/RUS legs and ``axis``/``arm`` for RUS legs), a chain
+            ``{"screws": ..., "home": ..., "actuated": ...}``, or :class:`Leg` objects
+            (:meth:`Leg.from_screws`). Types may be mixed on one platform.
         platform : str
             ``planar`` (x, y, phi), ``planar_point`` (x, y), ``spatial``
             (x, y, z, roll, pitch, yaw) or ``spatial_translational`` (x, y, z).
@@ -200,6 +206,10 @@ class Mechanism:
             Allow more actuated legs than degrees of freedom (redundant actuation). The
             direct model then solves the overdetermined closure in the least-squares sense
             (Gauss-Newton), and the leg lengths must be consistent for it to close.
+        reduced : bool
+            Distance legs (RPR, RRR, UPS, RUS, ...) as one row |P - C(q_a)| = l each
+            (default); False: every leg in its chain form (the joint-level closure), which
+            gives the same configurations.
         """
         if not isinstance(redundant, (bool, np.bool_, int, np.integer)) or redundant not in (0, 1):
             raise MechanismError(f"redundant: expected True or False, got {_show(redundant)}",
@@ -207,23 +217,34 @@ class Mechanism:
         if params is not None and not isinstance(params, Mapping):
             raise MechanismError(f"params: expected a mapping, got {_show(params)}",
                                  path=("params",))
+        if not isinstance(reduced, (bool, np.bool_)):
+            raise MechanismError(f"reduced: expected True or False, got {_show(reduced)}",
+                                 path=("reduced",))
         legs_t = validate_legs(legs, platform, redundant=bool(redundant))
         m = object.__new__(cls)
         m.kind = "legs"
         m.name = _name(name)
         m.legs = legs_t
         m.platform = platform
-        dim, dof, coords = PLATFORMS[platform]
+        plat = PLATFORMS[platform]
+        dim, coords = plat.space_dim, plat.task
         names, act, rev = [], [], []
         for i, leg in enumerate(legs_t):
+            kinds = leg.kinds
             for k, jn in enumerate(leg.joint_names):
                 names.append(f"L{i + 1}.{jn}")
-                act.append(k == leg.actuated_index)
-                rev.append(jn != "rho")
+                act.append(k in leg.actuated)
+                rev.append(kinds[k] == "R")
+        if len(set(names)) != len(names):
+            raise MechanismError("legs: two joint variables have one name; name the legs' "
+                                 "joints differently", path=("legs",))
         m.joint_names = tuple(names)
         m.actuated = tuple(act)
         m.revolute = tuple(rev)
-        m.dof = dof
+        n_act = int(sum(act))
+        m.dof = plat.dof if (bool(redundant) or all(
+            leg.distance is not None for leg in legs_t)) else n_act
+        m.reduced = bool(reduced)
         m.planar = dim == 2
         m.redundant = bool(redundant)
         m.limits = {}
@@ -235,12 +256,13 @@ class Mechanism:
             m.home = None
         else:
             try:
-                m.home = as_vector(home, "home", dof, path=("home",))
+                m.home = as_vector(home, "home", len(coords), path=("home",))
             except MechanismError:
                 raise MechanismError(
-                    f"home: expected {dof} finite task coordinates {list(coords)}, got "
+                    f"home: expected {len(coords)} finite task coordinates {list(coords)}, got "
                     f"{_show(home)}", path=("home",)
                 ) from None
+            m.home.setflags(write=False)
         m._spec = {
             "kind": "legs",
             "name": m.name,
@@ -250,6 +272,8 @@ class Mechanism:
         }
         if m.redundant:  # only then, so that existing keys do not change
             m._spec["redundant"] = True
+        if not m.reduced:
+            m._spec["reduced"] = False
         m._finish()
         return m
 
@@ -315,14 +339,51 @@ class Mechanism:
         return True
 
     def _finish(self) -> None:
+        if getattr(self, "home", None) is not None:
+            self.home.setflags(write=False)
+        if self.kind == "khalil":
+            frames = self.table.frames
+            topo: tuple = ("khalil", tuple((f.a, f.mu, f.sigma, f.name) for f in frames),
+                           self.table.loops, self.end_effector)
+            geo = np.array([[f.gamma, f.b, f.alpha, f.d, f.theta, f.r] for f in frames],
+                           dtype=float).ravel()
+        else:
+            topo = ("legs", self.platform, tuple(leg.topology for leg in self.legs),
+                    self.redundant, self.reduced)
+            geo = np.concatenate([leg.geometry() for leg in self.legs])
+        geo.setflags(write=False)
+        object.__setattr__(self, "_topology", topo)
+        object.__setattr__(self, "_geometry", geo)
         blob = json.dumps(_jsonable(self._spec), sort_keys=True, default=repr).encode()
         object.__setattr__(self, "_key", hashlib.sha256(blob).hexdigest()[:16])
 
     # ------------------------------------------------------------------ views
     @property
     def key(self) -> str:
-        """A content hash: equal descriptions share compiled models."""
+        """A content hash of the whole description (topology and numbers)."""
         return self._key
+
+    @property
+    def topology(self) -> tuple:
+        """What the compiled code depends on (hashable): joint types, leg structure,
+        actuated joints, the Khalil table's structure; not the numbers. Mechanisms of one
+        topology share their compiled model and differ only in :attr:`geometry`."""
+        return self._topology
+
+    @property
+    def geometry(self) -> np.ndarray:
+        """The numbers of the description as one read-only vector (names:
+        :attr:`geometry_names`): Khalil (gamma, b, alpha, d, theta, r) per frame; legs
+        their screws, home poses, platform points and distance forms."""
+        return self._geometry
+
+    @property
+    def geometry_names(self) -> tuple[str, ...]:
+        if self.kind == "khalil":
+            return tuple(f"rows[{f.j - 1}].{c}" for f in self.table.frames
+                         for c in ("gamma", "b", "alpha", "d", "theta", "r"))
+        return tuple(f"legs[{i}].{n}" for i, leg in enumerate(self.legs)
+                     for n in leg.geometry_names())
 
     @property
     def active_names(self) -> tuple[str, ...]:
@@ -379,7 +440,7 @@ class Mechanism:
                  spec.get("limits")),
             )
         return (_rebuild_legs, (spec["legs"], spec["platform"], spec["name"], spec["home"],
-                                spec.get("redundant", False)))
+                                spec.get("redundant", False), spec.get("reduced", True)))
 
 
 
@@ -394,5 +455,5 @@ def _rebuild_khalil(rows, loops, params, ee, name, task, home, dof, limits=None)
     return Mechanism.from_khalil(rows, loops, params, ee, name, task, home, dof, limits)
 
 
-def _rebuild_legs(legs, platform, name, home, redundant=False):
-    return Mechanism.from_legs(legs, platform, name, home, redundant=redundant)
+def _rebuild_legs(legs, platform, name, home, redundant=False, reduced=True):
+    return Mechanism.from_legs(legs, platform, name, home, redundant=redundant, reduced=reduced)

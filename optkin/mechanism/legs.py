@@ -1,26 +1,50 @@
-"""Parallel platforms described by their legs (numpy only).
+"""Legs of parallel platforms: serial chains in product-of-exponentials form (numpy data).
 
-A leg joins a fixed base point to a platform point (given in the platform frame) through a
-joint sequence. Supported sequences and the joint that may be actuated:
+A leg is a serial chain of joints (:mod:`optkin.mechanism.joints`, moved by :mod:`optkin.model.joints`) from the base to the
+moving platform, given as in Lynch & Park, *Modern Robotics* ch. 4: one screw per joint
+variable, ``S = (omega, v)`` in the fixed frame at the home configuration (every variable
+zero), and the pose ``home`` reached at the end of the chain there. The chain's end is
+either
 
-============  =========  =============================================  ==========
-type          platform   joints (names)                                 actuated
-============  =========  =============================================  ==========
-``RPR``       planar     theta (base R), rho (P), psi (platform R)       rho
-``RRR``       planar     theta1 (base R), theta2 (elbow), theta3         theta1
-``UPS/SPS``   spatial    ua, ub (base U), rho (P), sa, sb, sc (S)        rho
-``RUS/RSS``   spatial    theta (base R), ua, ub (elbow, forearm dir.)   theta
-============  =========  =============================================  ==========
+* the platform frame itself (``end="frame"``, what :meth:`Leg.from_screws` builds): the leg
+  constrains the whole platform pose, ``T_leg(q) = T_platform``; or
+* a point of the platform (``end="point"``) reached through a spherical joint (a planar
+  revolute for planar platforms) that is not part of the chain: the leg constrains only
+  where that point is, ``T_leg(q) e0 = T_platform b``. Its angles are *reported* in the
+  joint values (computed from the orientation) when the leg type names them.
 
-Each leg gives one closure equation between the platform pose and its actuated joint
-(seed 003, "Inverse Kinematics": the inverse model is stated leg by leg); the passive joints
-follow in closed form from the pose, and :func:`leg_inverse` lists every posture (branch)
-of a leg.
+Many classical legs are a distance constraint: the actuated joint moves a centre C (or is
+the distance itself) and a link of fixed length joins C to a platform point P, so
+``|P - C(q_a)| = l`` (seed 003's leg-by-leg equations; the rows of A and B of Chablat and
+Wenger). Such legs carry a :class:`Distance` description and the model uses this reduced
+one-row form by default; it gives the same configurations as the chain's full closure.
+
+Builders (:data:`LEG_TYPES`) keep the familiar types, each a thin constructor of a chain:
+
+=====  =========  =======================================  =============  ========
+type   platform   joint values                              actuated       form
+=====  =========  =======================================  =============  ========
+RPR    planar     theta, rho, psi                           rho            distance
+RRR    planar     theta1, theta2, theta3                    theta1         distance
+PRR    planar     s, theta, psi                             s              distance
+UPS    spatial    ua, ub, rho, sa, sb, sc                   rho            distance
+SPS    spatial    as UPS (the base spin about the leg is idle)  rho        distance
+RUS    spatial    theta, ua, ub (the platform S unreported) theta          distance
+RSS    spatial    as RUS (the elbow spin is idle)           theta          distance
+PUS    spatial    s, ua, ub (the platform S unreported)     s              distance
+RPS    spatial    theta, rho, sa, sb, sc                    rho            chain
+PRS    spatial    s, theta, sa, sb, sc                      s              chain
+UPU    spatial    ua, ub, rho, va, vb                       rho            chain
+PSP    spatial    s, sa, sb, sc, t                          s              chain
+=====  =========  =======================================  =============  ========
+
+Adding a leg type: write its builder (a function returning a :class:`Leg`) and register it
+with :func:`leg_type`. The problem-file schema reads this registry.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,28 +54,340 @@ from .._checks import as_vector
 from .._checks import show as _show
 from ..errors import MechanismError
 from ..numeric import singular_values
-from .geometry import euler_xyz, rot2, rot_x, rot_y, rot_z, wrap_angle
+from .joints import JOINT_TYPES, expand, n_vars
+from .platforms import PLATFORMS
 
-__all__ = ["Leg", "LEG_TYPES", "PLATFORMS", "MAX_LEGS", "degenerate_points", "leg_inverse",
-           "leg_forward", "leg_joints"]
+__all__ = ["Leg", "Distance", "LegType", "LEG_TYPES", "MAX_LEGS", "degenerate_points",
+           "leg_type", "validate_legs", "revolute_screw", "prismatic_screw"]
 
-#: type -> (dimension, joint names, actuated index, number of link lengths)
-LEG_TYPES: dict[str, tuple[int, tuple[str, ...], int, int]] = {
-    "RPR": (2, ("theta", "rho", "psi"), 1, 0),
-    "RRR": (2, ("theta1", "theta2", "theta3"), 0, 2),
-    "UPS": (3, ("ua", "ub", "rho", "sa", "sb", "sc"), 2, 0),
-    "SPS": (3, ("ua", "ub", "rho", "sa", "sb", "sc"), 2, 0),
-    "RUS": (3, ("theta", "ua", "ub"), 0, 2),
-    "RSS": (3, ("theta", "ua", "ub"), 0, 2),
-}
+#: Most legs a platform may have (redundant actuation included).
+MAX_LEGS = 64
+#: Most elementary joint variables in one leg.
+MAX_LEG_VARIABLES = 24
 
-#: platform kind -> (space dimension, degrees of freedom, task coordinates)
-PLATFORMS: dict[str, tuple[int, int, tuple[str, ...]]] = {
-    "planar": (2, 3, ("x", "y", "phi")),
-    "planar_point": (2, 2, ("x", "y")),
-    "spatial": (3, 6, ("x", "y", "z", "roll", "pitch", "yaw")),
-    "spatial_translational": (3, 3, ("x", "y", "z")),
-}
+
+def revolute_screw(axis: Any, point: Any) -> np.ndarray:
+    """The screw (omega, -omega x q) of a rotation about the line through ``point`` along
+    the unit ``axis`` (3 numbers each; 2-D points lie in the plane z = 0).
+
+    >>> revolute_screw([0, 0, 1], [1, 0]).tolist()
+    [0.0, 0.0, 1.0, 0.0, -1.0, 0.0]
+    """
+    w = _pad3(np.asarray(axis, dtype=float))
+    q = _pad3(np.asarray(point, dtype=float))
+    return np.concatenate([w, -np.cross(w, q)])
+
+
+def prismatic_screw(direction: Any) -> np.ndarray:
+    """The screw (0, v) of a translation along the unit ``direction``."""
+    return np.concatenate([np.zeros(3), _pad3(np.asarray(direction, dtype=float))])
+
+
+def _pad3(v: np.ndarray) -> np.ndarray:
+    v = np.asarray(v, dtype=float).ravel()
+    return np.concatenate([v, np.zeros(3 - v.size)]) if v.size < 3 else v
+
+
+def _frozen(a: Any) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class Distance:
+    """A leg that is a distance constraint ``|P - C(q_a)| = l``.
+
+    Attributes
+    ----------
+    driver : int
+        How many leading variables move the centre C (the actuated joint, or 0 when the
+        actuated joint is the distance itself).
+    pivot : int
+        Index (in ``Leg.joints``) of the joint at C that turns the link towards P.
+    centre : ndarray (3,)
+        C at home.
+    direction : ndarray (3,)
+        The unit direction of the link at home, from C towards P.
+    length : float or None
+        The link's length l; None when the actuated prismatic joint after the pivot is the
+        distance (RPR, UPS).
+    """
+
+    driver: int
+    pivot: int
+    centre: np.ndarray
+    direction: np.ndarray
+    length: float | None
+
+
+@dataclass(frozen=True, eq=False)
+class Leg:
+    """One leg: a serial chain from the base to the platform (see the module docstring).
+
+    Build one with a type builder (``Leg.from_spec({"type": "UPS", ...})``, or through
+    :meth:`optkin.Mechanism.from_legs`) or from its screws with :meth:`from_screws`.
+
+    Attributes
+    ----------
+    type : str
+        The leg's type (``"UPS"``) or, for chains built from screws, its joint string.
+    joints : str
+        The letters of the chain's joints, base to platform (:data:`~optkin.mechanism.joints.JOINT_TYPES`).
+    screws : ndarray (n, 6)
+        One screw per joint variable, fixed frame, home configuration.
+    names : tuple of str
+        The joint variables' names.
+    actuated : tuple of int
+        Indices of the actuated variables.
+    home : ndarray (4, 4)
+        The chain's end at home: the platform frame (frame end) or a frame whose origin
+        is the end point e0 (point end).
+    end : str
+        ``"frame"`` or ``"point"``.
+    platform_point : ndarray (3,)
+        The end point in the platform frame (point end; zero for a frame end).
+    end_joint : str
+        The joint at the platform ("S", or "R" for planar legs) of a point end.
+    reported : bool
+        The last joint of ``joints`` is that end joint: its variables follow from the
+        orientation (UPS's sa, sb, sc; RPR's psi) instead of constraining anything.
+    distance : Distance or None
+        The reduced distance form, when the leg is one.
+    base, platform, lengths, axis, arm :
+        The builder's geometry (attachment points in the base and platform frames, link
+        lengths, axes), for reports and drawings; empty for chains built from screws.
+    inventory : tuple
+        (joint freedoms, moving links, idle freedoms) of the physical leg, for Grubler's
+        count (a Delta's parallelogram is two S-S rods, not R + U + S).
+    """
+
+    type: str
+    joints: str
+    screws: np.ndarray
+    names: tuple[str, ...]
+    actuated: tuple[int, ...]
+    home: np.ndarray
+    end: str
+    platform_point: np.ndarray
+    dim: int
+    end_joint: str = ""
+    reported: bool = False
+    distance: Distance | None = None
+    base: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    platform: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    lengths: tuple[float, ...] = ()
+    axis: np.ndarray | None = None
+    arm: np.ndarray | None = None
+    inventory: tuple[tuple[int, ...], int, int] = ((), 0, 0)
+    spec: Mapping[str, Any] = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def kinds(self) -> str:
+        """One letter per variable: ``"R"`` rotation, ``"P"`` translation."""
+        return expand(self.joints)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self.names
+
+    @property
+    def actuated_index(self) -> int:
+        """The (first) actuated variable."""
+        return self.actuated[0]
+
+    @property
+    def n_reported(self) -> int:
+        """How many trailing variables are the reported end joint's."""
+        return n_vars(self.joints[-1]) if self.reported else 0
+
+    @property
+    def topology(self) -> tuple:
+        """What the compiled code depends on (not the numbers)."""
+        d = self.distance
+        dist = None if d is None else (d.driver, d.pivot, d.length is None)
+        return (self.type, self.joints, self.actuated, self.end, self.end_joint, self.reported,
+                self.dim, dist)
+
+    def geometry(self) -> np.ndarray:
+        """The leg's numbers as one vector (layout: :meth:`geometry_names`)."""
+        d = self.distance
+        parts = [self.screws.ravel(), self.home[:3, :].T.ravel(), self.platform_point]
+        if d is not None:
+            parts += [d.centre, d.direction, [d.length if d.length is not None else 0.0]]
+        return np.concatenate([np.asarray(p, dtype=float).ravel() for p in parts])
+
+    def geometry_names(self) -> list[str]:
+        names = [f"screws[{k}][{c}]" for k in range(len(self.screws)) for c in range(6)]
+        names += [f"home[{r}][{c}]" for c in range(4) for r in range(3)]
+        names += [f"platform_point[{c}]" for c in range(3)]
+        if self.distance is not None:
+            names += [f"distance.centre[{c}]" for c in range(3)]
+            names += [f"distance.direction[{c}]" for c in range(3)] + ["distance.length"]
+        return names
+
+    def to_dict(self) -> dict[str, Any]:
+        """The leg's description (the builder's arguments, or the screws)."""
+        if self.spec:
+            return {k: (np.asarray(v).tolist() if isinstance(v, np.ndarray) else v)
+                    for k, v in self.spec.items()}
+        return {"screws": self.screws.tolist(), "home": self.home.tolist(),
+                "actuated": list(self.actuated), "joints": self.joints}
+
+    # ------------------------------------------------------------------ builders
+    @classmethod
+    def from_screws(cls, screws: Any, home: Any, actuated: Any, joints: str | None = None,
+                    name: str | None = None) -> Leg:
+        """A leg from its screws: the general chain (Modern Robotics (4.14)).
+
+        Parameters
+        ----------
+        screws : array (n, 6)
+            Rows ``(omega, v)`` in the fixed frame at home: ``|omega| = 1`` for a rotation
+            (``v = -omega x q``, q a point of the axis), ``omega = 0`` and ``|v| = 1`` for
+            a translation.
+        home : array (4, 4)
+            The pose of the platform frame reached through this leg when every joint is
+            zero.
+        actuated : int or sequence of int
+            Index (or indices) of the actuated variable(s).
+        joints : str, optional
+            Groups the screws into joints for names and reports, e.g. ``"UPU"`` (U = two
+            rotations with intersecting axes, S = three, C = a rotation and a translation
+            along one axis). Default: one R or P per screw.
+        name : str, optional
+            The leg's label (default: the joint string).
+
+        Examples
+        --------
+        A 3-RPR leg from base point (1, 0) with the platform frame at (1, 0) at home:
+
+        >>> from optkin.mechanism.legs import revolute_screw, prismatic_screw
+        >>> S = [revolute_screw([0, 0, 1], [1, 0]), prismatic_screw([1, 0]),
+        ...      revolute_screw([0, 0, 1], [1, 0])]
+        >>> T = [[1, 0, 0, 1], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+        >>> Leg.from_screws(S, T, actuated=1, joints="RPR").names
+        ('R1', 'P2', 'R3')
+        """
+        S = _screws(screws, "screws")
+        kinds = "".join("P" if np.linalg.norm(s[:3]) == 0 else "R" for s in S)
+        if joints is None:
+            joints = kinds
+        if not isinstance(joints, str) or not joints:
+            raise MechanismError(f"joints: expected a string of joint letters among "
+                                 f"{sorted(JOINT_TYPES)}, got {_show(joints)}", path=("joints",))
+        bad = [c for c in joints if c not in JOINT_TYPES]
+        if bad:
+            raise MechanismError(f"joints: unknown joint letter {bad[0]!r}; known: "
+                                 f"{sorted(JOINT_TYPES)}", path=("joints",))
+        if expand(joints) != kinds:
+            raise MechanismError(
+                f"joints: {joints!r} means screws of kinds {expand(joints)!r} (R rotation, P "
+                f"translation), but the screws are {kinds!r}", path=("joints",))
+        T = _pose4(home, "home")
+        act = _actuated(actuated, len(S))
+        names = []
+        for k, c in enumerate(joints):
+            for suf in JOINT_TYPES[c].suffixes:
+                names.append(f"{c}{k + 1}{suf}")
+        label = _label(name if name is not None else joints)
+        planar = _is_planar(S, T)
+        dim = 2 if planar else 3
+        return cls(type=label, joints=joints, screws=_frozen(S), names=tuple(names),
+                   actuated=act, home=_frozen(T), end="frame", platform_point=_frozen(np.zeros(3)),
+                   dim=dim, inventory=(tuple(n_vars(c) for c in joints), len(joints) - 1, 0))
+
+    @classmethod
+    def from_spec(cls, spec: Mapping[str, Any] | Leg, i: int) -> Leg:
+        """Build and validate leg ``i`` (0-based) from a mapping ``{"type": ..., ...}``
+        (one of :data:`LEG_TYPES`) or ``{"screws": ..., "home": ..., "actuated": ...}``."""
+        if isinstance(spec, Leg):
+            if not spec.spec:
+                return spec
+            spec = spec.spec
+        where = f"legs[{i}]"
+        if not isinstance(spec, Mapping):
+            raise MechanismError(f"{where}: expected a mapping with type, base, platform "
+                                 "(or screws, home, actuated)", path=("legs", i))
+        if "screws" in spec:
+            allowed = {"screws", "home", "actuated", "joints", "name"}
+            unknown = sorted(set(spec) - allowed, key=str)
+            if unknown:
+                raise MechanismError(f"{where}: unknown key(s) {unknown}; a chain takes "
+                                     f"{sorted(allowed)}", path=("legs", i, str(unknown[0])))
+            for key in ("home", "actuated"):
+                if key not in spec:
+                    raise MechanismError(f"{where}.{key}: missing", path=("legs", i, key))
+            try:
+                return cls.from_screws(spec["screws"], spec["home"], spec["actuated"],
+                                       spec.get("joints"), spec.get("name"))
+            except MechanismError as e:
+                raise MechanismError(f"{where}.{e}", path=("legs", i, *e.path)) from None
+        t = spec.get("type", "")
+        t = t.upper() if isinstance(t, str) else ""
+        lt = LEG_TYPES.get(t)
+        if lt is None:
+            raise MechanismError(
+                f"{where}.type: unknown leg type {_show(spec.get('type'))}; supported: "
+                f"{sorted(LEG_TYPES)}, or a chain given by its screws (Leg.from_screws)",
+                path=("legs", i, "type"))
+        allowed = {"type", "base", "platform", "actuated", *lt.keys}
+        unknown = sorted(set(spec) - allowed, key=str)
+        if unknown:
+            raise MechanismError(f"{where}: unknown key(s) {unknown}; a {t} leg takes "
+                                 f"{sorted(allowed)}", path=("legs", i, str(unknown[0])))
+        args: dict[str, Any] = {}
+        for key in ("base", "platform"):
+            if key not in spec:
+                raise MechanismError(f"{where}.{key}: missing; give the joint centre "
+                                     f"({lt.dim} numbers)", path=("legs", i, key))
+            args[key] = _vec(spec[key], lt.dim, f"{where}.{key}", ("legs", i, key))
+        for key, n in lt.keys.items():
+            v = spec.get(key)
+            if key == "lengths" and n == 0:
+                if not _empty(v):
+                    raise MechanismError(f"{where}.lengths: {t} legs have no fixed link "
+                                         "lengths", path=("legs", i, "lengths"))
+                continue
+            if v is None:
+                if key in lt.optional:
+                    continue
+                raise MechanismError(f"{where}.{key}: {t} legs need {key} ({lt.doc[key]})",
+                                     path=("legs", i, key))
+            args[key] = _vec(v, n, f"{where}.{key}", ("legs", i, key))
+        if "actuated" in spec and spec["actuated"] is not None:
+            a = spec["actuated"]
+            names = lt.names
+            if isinstance(a, str):
+                a = names.index(a) if a in names else -2
+            if isinstance(a, bool) or not isinstance(a, (int, np.integer)) or a != lt.actuated:
+                raise MechanismError(
+                    f"{where}.actuated: {_show(spec['actuated'])} is not supported for {t} "
+                    f"legs; the actuated joint is {names[lt.actuated]!r} (index {lt.actuated})",
+                    path=("legs", i, "actuated"))
+        try:
+            leg = lt.build(**args)
+        except MechanismError as e:
+            raise MechanismError(f"{where}.{e}", path=("legs", i, *e.path)) from None
+        keep = {"type": t, **{k: (v.tolist() if isinstance(v, np.ndarray) else v)
+                              for k, v in args.items()}}
+        object.__setattr__(leg, "spec", keep)
+        return leg
+
+
+# --------------------------------------------------------------------------------------
+# input checks
+
+
+def _empty(v: Any) -> bool:
+    """None or an empty list / tuple / array (a leg type without fixed lengths)."""
+    if v is None:
+        return True
+    try:
+        return len(v) == 0
+    except TypeError:
+        return False
 
 
 def _vec(v: Any, n: int, where: str, path: tuple = ()) -> np.ndarray:
@@ -67,281 +403,348 @@ def _vec(v: Any, n: int, where: str, path: tuple = ()) -> np.ndarray:
     return a
 
 
-@dataclass(frozen=True)
-class Leg:
-    """One leg of a parallel platform.
+def _screws(v: Any, where: str) -> np.ndarray:
+    try:
+        S = np.asarray(v, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        raise MechanismError(f"{where}: expected an (n, 6) array of screws, got {_show(v)}",
+                             path=(where,)) from None
+    if S.ndim != 2 or S.shape[1] != 6 or not 1 <= S.shape[0] <= MAX_LEG_VARIABLES:
+        raise MechanismError(f"{where}: expected an (n, 6) array of screws (1 <= n <= "
+                             f"{MAX_LEG_VARIABLES}), got shape {S.shape}", path=(where,))
+    if not np.all(np.isfinite(S)) or np.abs(S).max() > 1e150:
+        raise MechanismError(f"{where}: non-finite or huge entries", path=(where,))
+    for k, s in enumerate(S):
+        nw, nv = np.linalg.norm(s[:3]), np.linalg.norm(s[3:])
+        if nw > 0 and abs(nw - 1) > 1e-9:
+            raise MechanismError(f"{where}[{k}]: the rotation axis omega must be a unit vector "
+                                 f"(|omega| = {nw:.6g}); for a translation give omega = 0",
+                                 path=(where, k))
+        if nw == 0 and abs(nv - 1) > 1e-9:
+            raise MechanismError(f"{where}[{k}]: a translation needs a unit direction v "
+                                 f"(|v| = {nv:.6g})", path=(where, k))
+        if nw > 0 and abs(float(s[:3] @ s[3:])) > 1e-9 * max(1.0, nv):
+            raise MechanismError(f"{where}[{k}]: omega . v must be 0 for a revolute joint "
+                                 "(v = -omega x q); screws with a pitch are not joints here",
+                                 path=(where, k))
+    return S
 
-    Parameters
-    ----------
-    type : str
-        One of :data:`LEG_TYPES`.
-    base : array (2,) or (3,)
-        The base joint centre in the base frame.
-    platform : array (2,) or (3,)
-        The platform joint centre in the platform frame.
-    lengths : tuple
-        Link lengths: ``(proximal, distal)`` for RRR and RUS/RSS, empty otherwise.
-    axis, arm : array (3,), RUS/RSS only
-        The base revolute axis and the arm direction at theta = 0 (orthogonal unit vectors);
-        the arm turns towards ``axis x arm`` as theta grows.
-    """
 
-    type: str
-    base: np.ndarray
-    platform: np.ndarray
-    lengths: tuple[float, ...] = ()
-    axis: np.ndarray | None = None
-    arm: np.ndarray | None = None
-    actuated: int = field(default=-1)
+def _pose4(v: Any, where: str) -> np.ndarray:
+    try:
+        T = np.asarray(v, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        T = np.zeros(0)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise MechanismError(f"{where}: expected a 4x4 homogeneous transform, got "
+                             f"{_show(v)}", path=(where,))
+    R = T[:3, :3]
+    if np.abs(R.T @ R - np.eye(3)).max() > 1e-9 or np.linalg.det(R) < 0 or np.abs(
+            T[3] - [0, 0, 0, 1]).max() > 1e-12:
+        raise MechanismError(f"{where}: not a rigid transform (orthonormal rotation block, "
+                             "det +1, last row 0 0 0 1)", path=(where,))
+    return T
 
-    @property
-    def dim(self) -> int:
-        return LEG_TYPES[self.type][0]
 
-    @property
-    def joint_names(self) -> tuple[str, ...]:
-        return LEG_TYPES[self.type][1]
+def _actuated(v: Any, n: int) -> tuple[int, ...]:
+    vals = [v] if isinstance(v, (int, np.integer)) and not isinstance(v, bool) else v
+    try:
+        out = tuple(int(a) for a in vals if not isinstance(a, bool) and float(a) == int(a))
+        ok = len(out) == len(vals) and len(out) >= 1 and len(set(out)) == len(out)
+    except (TypeError, ValueError, OverflowError):
+        ok, out = False, ()
+    if not ok or any(not 0 <= a < n for a in out):
+        raise MechanismError(f"actuated: expected the index (or indices) of actuated "
+                             f"variables in 0..{n - 1}, got {_show(v)}", path=("actuated",))
+    return tuple(sorted(out))
 
-    @property
-    def actuated_index(self) -> int:
-        return LEG_TYPES[self.type][2]
 
-    def to_dict(self) -> dict[str, Any]:
-        d: dict[str, Any] = {
-            "type": self.type,
-            "base": np.asarray(self.base, dtype=float).tolist(),
-            "platform": np.asarray(self.platform, dtype=float).tolist(),
-        }
-        if self.lengths:
-            d["lengths"] = list(self.lengths)
-        if self.axis is not None:
-            d["axis"] = np.asarray(self.axis, dtype=float).tolist()
-            d["arm"] = np.asarray(self.arm, dtype=float).tolist()
-        return d
+def _label(v: Any) -> str:
+    if not isinstance(v, str) or not v or len(v) > 40:
+        raise MechanismError(f"name: expected a short string, got {_show(v)}", path=("name",))
+    return v
 
-    @classmethod
-    def from_spec(cls, spec: Mapping[str, Any] | Leg, i: int) -> Leg:
-        """Build and validate leg ``i`` (0-based) from a mapping."""
-        if isinstance(spec, Leg):  # re-validated: a Leg built directly skipped the checks
-            fields: dict[str, Any] = {"type": spec.type, "base": spec.base,
-                                      "platform": spec.platform}
-            if spec.lengths:
-                fields["lengths"] = spec.lengths
-            for key in ("axis", "arm"):
-                if getattr(spec, key) is not None:
-                    fields[key] = getattr(spec, key)
-            if spec.actuated != -1:
-                fields["actuated"] = spec.actuated
-            spec = fields
-        where = f"legs[{i}]"
-        if not isinstance(spec, Mapping):
-            raise MechanismError(f"{where}: expected a mapping with type, base, platform",
-                                 path=("legs", i))
-        allowed = {"type", "base", "platform", "lengths", "axis", "arm", "actuated"}
-        unknown = sorted(set(spec) - allowed, key=str)
-        if unknown:
-            raise MechanismError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(allowed)}",
-                                 path=("legs", i, str(unknown[0])))
-        t = spec.get("type", "")
-        t = t.upper() if isinstance(t, str) else ""
-        if t not in LEG_TYPES:
-            raise MechanismError(
-                f"{where}.type: unknown leg type {_show(spec.get('type'))}; supported: "
-                f"{sorted(LEG_TYPES)}", path=("legs", i, "type")
-            )
-        dim, names, act, nlen = LEG_TYPES[t]
-        for key in ("base", "platform"):
-            if key not in spec:
-                raise MechanismError(f"{where}.{key}: missing; give the joint centre ({dim} numbers)",
-                                     path=("legs", i, key))
-        base = _vec(spec["base"], dim, f"{where}.base", ("legs", i, "base"))
-        plat = _vec(spec["platform"], dim, f"{where}.platform", ("legs", i, "platform"))
-        if "actuated" in spec and spec["actuated"] is not None:
-            a = spec["actuated"]
-            if isinstance(a, str):
-                a = names.index(a) if a in names else -2
-            if isinstance(a, bool) or not isinstance(a, (int, np.integer)) or a != act:
-                raise MechanismError(
-                    f"{where}.actuated: {_show(spec['actuated'])} is not supported for {t} legs; "
-                    f"the actuated joint is {names[act]!r} (index {act})",
-                    path=("legs", i, "actuated")
-                )
-        lengths: tuple[float, ...] = ()
-        if nlen:
-            if "lengths" not in spec:
-                raise MechanismError(f"{where}.lengths: {t} legs need {nlen} link lengths",
-                                     path=("legs", i, "lengths"))
-            L = _vec(spec["lengths"], nlen, f"{where}.lengths", ("legs", i, "lengths"))
-            if np.any(L <= 0):
-                raise MechanismError(
-                    f"{where}.lengths: link lengths must be positive, got {L.tolist()}",
-                    path=("legs", i, "lengths", int(np.flatnonzero(L <= 0)[0]))
-                )
-            lengths = tuple(float(v) for v in L)
-        elif not _empty(spec.get("lengths")):
-            raise MechanismError(f"{where}.lengths: {t} legs have no fixed link lengths",
-                                 path=("legs", i, "lengths"))
-        axis = arm = None
-        if t in ("RUS", "RSS"):
-            if "axis" not in spec or "arm" not in spec:
-                raise MechanismError(
-                    f"{where}: {t} legs need 'axis' (base revolute axis) and 'arm' (arm "
-                    "direction at theta=0), two orthogonal unit vectors",
-                    path=("legs", i, "axis" if "axis" not in spec else "arm")
-                )
-            axis = _vec(spec["axis"], 3, f"{where}.axis", ("legs", i, "axis"))
-            arm = _vec(spec["arm"], 3, f"{where}.arm", ("legs", i, "arm"))
-            for key, vec in (("axis", axis), ("arm", arm)):
-                if abs(np.linalg.norm(vec) - 1) > 1e-9:
-                    raise MechanismError(f"{where}: axis and arm must be unit vectors",
-                                         path=("legs", i, key))
-            if abs(axis @ arm) > 1e-9:
-                raise MechanismError(f"{where}: axis and arm must be orthogonal",
-                                     path=("legs", i, "arm"))
-        for key in ("axis", "arm"):
-            if t not in ("RUS", "RSS") and key in spec:
-                raise MechanismError(f"{where}.{key}: only RUS/RSS legs take {key!r}",
-                                     path=("legs", i, key))
-        for arr in (base, plat):
-            arr.setflags(write=False)
-        return cls(t, base, plat, lengths, axis, arm, act)
+
+def _is_planar(S: np.ndarray, T: np.ndarray) -> bool:
+    """Every rotation about z, every translation and the home frame in the plane z = 0."""
+    rot_ok = all(np.allclose(s[:2], 0) and np.isclose(abs(s[2]), 1) and np.isclose(s[5], 0)
+                 if np.linalg.norm(s[:3]) > 0 else np.isclose(s[5], 0) for s in S)
+    return bool(rot_ok and np.isclose(T[2, 3], 0) and np.allclose(T[:3, 2], [0, 0, 1]))
 
 
 # --------------------------------------------------------------------------------------
-# numpy leg kinematics (used for inverse, guesses, drawing, and as the reference in tests)
+# the leg types
 
 
-def _platform_point(leg: Leg, R: np.ndarray, p: np.ndarray) -> np.ndarray:
-    return p + R @ leg.platform
+@dataclass(frozen=True)
+class LegType:
+    """A leg type: its builder and what it takes (the schema reads these)."""
+
+    name: str
+    dim: int
+    names: tuple[str, ...]
+    actuated: int
+    keys: dict[str, int]  # extra keys -> number of values (lengths: how many)
+    doc: dict[str, str]
+    build: Callable[..., Leg]
+    optional: tuple[str, ...] = ()
+    summary: str = ""
 
 
-def leg_inverse(leg: Leg, R: np.ndarray, p: np.ndarray, tol: float = 1e-12) -> list[tuple[np.ndarray, int]]:
-    """Every posture of ``leg`` for the platform pose (R, p).
-
-    Returns a list of ``(joint values, branch)``; ``branch`` is +1/-1 for legs with two
-    postures (the sign of the leg's diagonal entry of B, seed 004) and +1 otherwise.
-    An empty list means the pose is out of the leg's reach.
-    """
-    P = _platform_point(leg, R, p)
-    A = leg.base
-    t = leg.type
-    if t == "RPR":
-        d = P - A
-        rho = float(np.hypot(*d))
-        th = float(np.arctan2(d[1], d[0]))
-        phi = float(np.arctan2(R[1, 0], R[0, 0]))
-        return [(np.array([th, rho, wrap_angle(phi - th)]), 1)]
-    if t == "RRR":
-        l1, l2 = leg.lengths
-        phi = float(np.arctan2(R[1, 0], R[0, 0]))
-        d = P - A
-        L = float(np.hypot(*d))
-        if L < tol:
-            return []
-        c = (L * L + l1 * l1 - l2 * l2) / (2 * L * l1)
-        if abs(c) > 1 + 1e-12:
-            return []
-        beta = float(np.arccos(np.clip(c, -1, 1)))
-        out = []
-        for s in (1, -1):
-            th1 = float(np.arctan2(d[1], d[0])) + s * beta
-            C = A + l1 * np.array([np.cos(th1), np.sin(th1)])
-            e = P - C
-            th12 = float(np.arctan2(e[1], e[0]))
-            q = np.array([wrap_angle(th1), wrap_angle(th12 - th1), wrap_angle(phi - th12)])
-            # B_ii = d/dtheta1 (|P - C| - l2) = -(P - C) . l1 n(theta1) / l2
-            n = np.array([-np.sin(th1), np.cos(th1)])
-            b = -(e @ n) * l1 / l2
-            out.append((q, 1 if b > 0 else -1))
-        if beta < 1e-12:
-            out = out[:1]
-        return out
-    if t in ("UPS", "SPS"):
-        d = P - A
-        rho = float(np.linalg.norm(d))
-        if rho < tol:
-            return []
-        u = d / rho
-        ub = float(np.arcsin(np.clip(u[0], -1, 1)))
-        ua = float(np.arctan2(-u[1], u[2]))
-        RS = (rot_x(ua) @ rot_y(ub)).T @ R
-        sa, sb, sc = euler_xyz(RS)
-        return [(np.array([ua, ub, rho, sa, sb, sc]), 1)]
-    if t in ("RUS", "RSS"):
-        la, lb = leg.lengths
-        u0, ax = leg.arm, leg.axis
-        w = np.cross(ax, u0)  # type: ignore[arg-type]
-        d = P - A
-        k = (d @ d + la * la - lb * lb) / (2 * la)
-        a, b = float(d @ u0), float(d @ w)
-        r = float(np.hypot(a, b))
-        if r < tol or abs(k) > r * (1 + 1e-12):
-            return []
-        base_ang = float(np.arctan2(b, a))
-        delta = float(np.arccos(np.clip(k / r, -1, 1)))
-        out = []
-        for s in (1, -1):
-            th = base_ang + s * delta
-            armv = np.cos(th) * u0 + np.sin(th) * w
-            C = A + la * armv
-            v = (P - C) / lb
-            F = np.column_stack([armv, ax, np.cross(armv, ax)])
-            vl = F.T @ v
-            ub = float(np.arcsin(np.clip(vl[0], -1, 1)))
-            ua = float(np.arctan2(-vl[1], vl[2]))
-            darm = -np.sin(th) * u0 + np.cos(th) * w
-            bii = -((P - C) @ darm) * la / lb
-            out.append((np.array([wrap_angle(th), ua, ub]), 1 if bii > 0 else -1))
-        if delta < 1e-12:
-            out = out[:1]
-        return out
-    raise MechanismError(f"unknown leg type {t!r}")  # pragma: no cover
+#: Leg type name -> :class:`LegType`.
+LEG_TYPES: dict[str, LegType] = {}
 
 
-def leg_forward(leg: Leg, q: np.ndarray, planar_point: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """The platform pose (R, p) reached by the serial chain of ``leg`` at joint values q."""
-    t = leg.type
-    if t == "RPR":
-        th, rho, psi = q
-        P = leg.base + rho * np.array([np.cos(th), np.sin(th)])
-        phi = 0.0 if planar_point else th + psi
-        R = rot2(phi)
-        return R, P - R @ leg.platform
-    if t == "RRR":
-        l1, l2 = leg.lengths
-        t1, t2, t3 = q
-        C = leg.base + l1 * np.array([np.cos(t1), np.sin(t1)])
-        P = C + l2 * np.array([np.cos(t1 + t2), np.sin(t1 + t2)])
-        phi = 0.0 if planar_point else t1 + t2 + t3
-        R = rot2(phi)
-        return R, P - R @ leg.platform
-    if t in ("UPS", "SPS"):
-        ua, ub, rho, sa, sb, sc = q
-        Rl = rot_x(ua) @ rot_y(ub)
-        P = leg.base + rho * Rl[:, 2]
-        R = Rl @ rot_x(sa) @ rot_y(sb) @ rot_z(sc)
-        return R, P - R @ leg.platform
-    if t in ("RUS", "RSS"):
-        la, lb = leg.lengths
-        th, ua, ub = q
-        u0, ax = leg.arm, leg.axis
-        w = np.cross(ax, u0)  # type: ignore[arg-type]
-        armv = np.cos(th) * u0 + np.sin(th) * w
-        C = leg.base + la * armv
-        F = np.column_stack([armv, ax, np.cross(armv, ax)])
-        v = F @ (rot_x(ua) @ rot_y(ub))[:, 2]
-        P = C + lb * v
-        return np.eye(3), P - leg.platform
-    raise MechanismError(f"unknown leg type {t!r}")  # pragma: no cover
+def leg_type(name: str, dim: int, names: Sequence[str], actuated: int,
+             keys: Mapping[str, int] | None = None, doc: Mapping[str, str] | None = None,
+             optional: Sequence[str] = (), summary: str = ""):
+    """Register a builder ``f(base, platform, **keys) -> Leg`` as leg type ``name``."""
+
+    def deco(fn: Callable[..., Leg]) -> Callable[..., Leg]:
+        LEG_TYPES[name] = LegType(name, dim, tuple(names), actuated, dict(keys or {}),
+                                  dict(doc or {}), fn, tuple(optional), summary)
+        return fn
+
+    return deco
 
 
-#: Most legs a platform may have (redundant actuation included).
-MAX_LEGS = 64
+_Z = np.array([0.0, 0.0, 1.0])
+_X = np.array([1.0, 0.0, 0.0])
+_Y = np.array([0.0, 1.0, 0.0])
+
+
+def _unit(v: np.ndarray, where: str) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    if n < 1e-12 or abs(n - 1) > 1e-9:
+        raise MechanismError(f"{where}: expected a unit vector, got {_show(v.tolist())}",
+                             path=(where,))
+    return v / n
+
+
+def _point_leg(type_: str, joints: str, screws: list, names: Sequence[str], actuated: int,
+               e0: np.ndarray, b: np.ndarray, dim: int, reported: bool, distance: Distance | None,
+               **geo: Any) -> Leg:
+    home = np.eye(4)
+    home[:3, 3] = e0
+    end_joint = "R" if dim == 2 else "S"
+    freedoms = tuple(n_vars(c) for c in joints)
+    if not reported:
+        freedoms += (n_vars(end_joint) if dim == 3 else 1,)
+    return Leg(type=type_, joints=joints, screws=_frozen(np.array(screws)), names=tuple(names),
+               actuated=(actuated,), home=_frozen(home), end="point",
+               platform_point=_frozen(_pad3(b)), dim=dim, end_joint=end_joint,
+               reported=reported, distance=distance,
+               inventory=(freedoms, len(freedoms) - 1, 0), **geo)
+
+
+def _geo(base: np.ndarray, platform: np.ndarray, **kw: Any) -> dict[str, Any]:
+    return {"base": _frozen(base), "platform": _frozen(platform), **kw}
+
+
+@leg_type("RPR", 2, ("theta", "rho", "psi"), 1,
+          summary="base revolute, actuated prismatic, platform revolute (planar)")
+def _rpr(base: np.ndarray, platform: np.ndarray) -> Leg:
+    A = _pad3(base)
+    S = [revolute_screw(_Z, A), prismatic_screw(_X), revolute_screw(_Z, A)]
+    d = Distance(0, 0, _frozen(A), _frozen(_X), None)
+    return _point_leg("RPR", "RPR", S, ("theta", "rho", "psi"), 1, A, platform, 2, True, d,
+                      **_geo(base, platform))
+
+
+@leg_type("RRR", 2, ("theta1", "theta2", "theta3"), 0, {"lengths": 2},
+          {"lengths": "proximal and distal link lengths"},
+          summary="actuated base revolute, elbow revolute, platform revolute (planar)")
+def _rrr(base: np.ndarray, platform: np.ndarray, lengths: np.ndarray) -> Leg:
+    l1, l2 = _positive_lengths(lengths)
+    A = _pad3(base)
+    C = A + l1 * _X
+    E = C + l2 * _X
+    S = [revolute_screw(_Z, A), revolute_screw(_Z, C), revolute_screw(_Z, E)]
+    d = Distance(1, 1, _frozen(C), _frozen(_X), l2)
+    return _point_leg("RRR", "RRR", S, ("theta1", "theta2", "theta3"), 0, E, platform, 2, True,
+                      d, **_geo(base, platform, lengths=(l1, l2)))
+
+
+@leg_type("PRR", 2, ("s", "theta", "psi"), 0, {"direction": 2, "lengths": 1},
+          {"direction": "the slider's unit direction", "lengths": "the distal link's length"},
+          summary="actuated slider, revolute on it, platform revolute (planar)")
+def _prr(base: np.ndarray, platform: np.ndarray, direction: np.ndarray,
+         lengths: np.ndarray) -> Leg:
+    (l2,) = _positive_lengths(lengths)
+    u = _unit(_pad3(direction), "direction")
+    A = _pad3(base)
+    E = A + l2 * _X
+    S = [prismatic_screw(u), revolute_screw(_Z, A), revolute_screw(_Z, E)]
+    d = Distance(1, 1, _frozen(A), _frozen(_X), l2)
+    return _point_leg("PRR", "PRR", S, ("s", "theta", "psi"), 0, E, platform, 2, True, d,
+                      **_geo(base, platform, lengths=(l2,), axis=_frozen(u)))
+
+
+def _ups(type_: str, base: np.ndarray, platform: np.ndarray) -> Leg:
+    A = _pad3(base)
+    S = [revolute_screw(_X, A), revolute_screw(_Y, A), prismatic_screw(_Z),
+         revolute_screw(_X, A), revolute_screw(_Y, A), revolute_screw(_Z, A)]
+    d = Distance(0, 0, _frozen(A), _frozen(_Z), None)
+    return _point_leg(type_, "UPS", S, ("ua", "ub", "rho", "sa", "sb", "sc"), 2, A, platform, 3,
+                      True, d, **_geo(base, platform))
+
+
+@leg_type("UPS", 3, ("ua", "ub", "rho", "sa", "sb", "sc"), 2,
+          summary="base universal, actuated prismatic, platform spherical")
+def _ups_leg(base: np.ndarray, platform: np.ndarray) -> Leg:
+    return _ups("UPS", base, platform)
+
+
+@leg_type("SPS", 3, ("ua", "ub", "rho", "sa", "sb", "sc"), 2,
+          summary="as UPS: the base spherical's spin about the leg is idle and left out")
+def _sps_leg(base: np.ndarray, platform: np.ndarray) -> Leg:
+    return _ups("SPS", base, platform)
+
+
+def _rus(type_: str, base, platform, lengths, axis, arm) -> Leg:
+    la, lb = _positive_lengths(lengths)
+    ax = _unit(axis, "axis")
+    ar = _unit(arm, "arm")
+    if abs(ax @ ar) > 1e-9:
+        raise MechanismError("arm: axis and arm must be orthogonal", path=("arm",))
+    A = _pad3(base)
+    C = A + la * ar
+    d_home = np.cross(ar, ax)
+    E = C + lb * d_home
+    S = [revolute_screw(ax, A), revolute_screw(ar, C), revolute_screw(ax, C)]
+    d = Distance(1, 1, _frozen(C), _frozen(d_home), lb)
+    return _point_leg(type_, "RU", S, ("theta", "ua", "ub"), 0, E, platform, 3, False, d,
+                      **_geo(base, platform, lengths=(la, lb), axis=_frozen(ax),
+                             arm=_frozen(ar)))
+
+
+_RUS_DOC = {"lengths": "arm (crank) and forearm (rod) lengths",
+            "axis": "the base revolute's unit axis", "arm": "the arm's unit direction at "
+            "theta = 0, orthogonal to axis (the arm turns towards axis x arm)"}
+
+
+@leg_type("RUS", 3, ("theta", "ua", "ub"), 0, {"lengths": 2, "axis": 3, "arm": 3}, _RUS_DOC,
+          summary="actuated base revolute (crank), universal, platform spherical")
+def _rus_leg(base, platform, lengths, axis, arm) -> Leg:
+    return _rus("RUS", base, platform, lengths, axis, arm)
+
+
+@leg_type("RSS", 3, ("theta", "ua", "ub"), 0, {"lengths": 2, "axis": 3, "arm": 3}, _RUS_DOC,
+          summary="as RUS: the elbow spherical's spin about the rod is idle and left out")
+def _rss_leg(base, platform, lengths, axis, arm) -> Leg:
+    return _rus("RSS", base, platform, lengths, axis, arm)
+
+
+@leg_type("PUS", 3, ("s", "ua", "ub"), 0, {"direction": 3, "lengths": 1},
+          {"direction": "the slider's unit direction", "lengths": "the rod's length"},
+          summary="actuated slider, universal on it, rod, platform spherical")
+def _pus_leg(base, platform, direction, lengths) -> Leg:
+    (lb,) = _positive_lengths(lengths)
+    u = _unit(direction, "direction")
+    A = _pad3(base)
+    E = A + lb * _Z  # the rod points up at home
+    S = [prismatic_screw(u), revolute_screw(_X, A), revolute_screw(_Y, A)]
+    d = Distance(1, 1, _frozen(A), _frozen(_Z), lb)
+    return _point_leg("PUS", "PU", S, ("s", "ua", "ub"), 0, E, platform, 3, False, d,
+                      **_geo(base, platform, lengths=(lb,), axis=_frozen(u)))
+
+
+@leg_type("RPS", 3, ("theta", "rho", "sa", "sb", "sc"), 1, {"axis": 3},
+          {"axis": "the base revolute's unit axis (the leg turns in the plane normal to it)"},
+          summary="passive base revolute, actuated prismatic, platform spherical")
+def _rps_leg(base, platform, axis) -> Leg:
+    ax = _unit(axis, "axis")
+    A = _pad3(base)
+    v = np.cross(ax, _X) if abs(ax @ _Z) > 0.9 else _Z - ax * (ax @ _Z)
+    v = v / np.linalg.norm(v)  # the leg's direction at home: normal to the axis
+    f1 = np.cross(v, ax)       # the spherical's axes: (f1, ax, v), orthonormal
+    S = [revolute_screw(ax, A), prismatic_screw(v), revolute_screw(f1, A),
+         revolute_screw(ax, A), revolute_screw(v, A)]
+    return _point_leg("RPS", "RPS", S, ("theta", "rho", "sa", "sb", "sc"), 1, A, platform, 3,
+                      True, None, **_geo(base, platform, axis=_frozen(ax)))
+
+
+@leg_type("PRS", 3, ("s", "theta", "sa", "sb", "sc"), 0,
+          {"direction": 3, "axis": 3, "lengths": 1},
+          {"direction": "the slider's unit direction", "axis": "the revolute's unit axis",
+           "lengths": "the link's length"},
+          summary="actuated slider, revolute, link, platform spherical")
+def _prs_leg(base, platform, direction, axis, lengths) -> Leg:
+    (l,) = _positive_lengths(lengths)
+    u = _unit(direction, "direction")
+    ax = _unit(axis, "axis")
+    A = _pad3(base)
+    v = u - ax * (ax @ u)  # the link along the slider at home (normal to the axis)
+    if np.linalg.norm(v) < 1e-9:
+        raise MechanismError("axis: the revolute axis must not be along the slider",
+                             path=("axis",))
+    v = v / np.linalg.norm(v)
+    f1 = np.cross(v, ax)
+    E = A + l * v
+    S = [prismatic_screw(u), revolute_screw(ax, A), revolute_screw(f1, E),
+         revolute_screw(ax, E), revolute_screw(v, E)]
+    return _point_leg("PRS", "PRS", S, ("s", "theta", "sa", "sb", "sc"), 0, E, platform, 3, True,
+                      None, **_geo(base, platform, lengths=(l,), axis=_frozen(ax),
+                                   arm=_frozen(u)))
+
+
+@leg_type("UPU", 3, ("ua", "ub", "rho", "va", "vb"), 2, {"axis": 3, "arm": 3},
+          {"axis": "the first base axis of the universal joint (fixed to the base)",
+           "arm": "its second axis at home (orthogonal to axis; the leg leaves along "
+                  "axis x arm); the platform joint's axes are arm then axis (Tsai's "
+                  "arrangement: the platform only translates)"},
+          summary="base universal, actuated prismatic, platform universal")
+def _upu_leg(base, platform, axis, arm) -> Leg:
+    a1 = _unit(axis, "axis")
+    a2 = _unit(arm, "arm")
+    if abs(a1 @ a2) > 1e-9:
+        raise MechanismError("arm: axis and arm must be orthogonal", path=("arm",))
+    A = _pad3(base)
+    b = _pad3(platform)
+    v = np.cross(a1, a2)
+    S = [revolute_screw(a1, A), revolute_screw(a2, A), prismatic_screw(v),
+         revolute_screw(a2, A), revolute_screw(a1, A)]
+    home = np.eye(4)
+    home[:3, 3] = A - b  # the platform frame at home: its point b at A
+    return Leg(type="UPU", joints="UPU", screws=_frozen(np.array(S)),
+               names=("ua", "ub", "rho", "va", "vb"), actuated=(2,), home=_frozen(home),
+               end="frame", platform_point=_frozen(b), dim=3, inventory=((2, 1, 2), 2, 0),
+               **_geo(base, platform, axis=_frozen(a1), arm=_frozen(a2)))
+
+
+@leg_type("PSP", 3, ("s", "sa", "sb", "sc", "t"), 0, {"direction": 3, "axis": 3},
+          {"direction": "the base slider's unit direction (actuated)",
+           "axis": "the platform slider's unit direction, in the platform frame"},
+          summary="actuated base slider, spherical, slider on the platform")
+def _psp_leg(base, platform, direction, axis) -> Leg:
+    u = _unit(direction, "direction")
+    w = _unit(axis, "axis")
+    A = _pad3(base)
+    b = _pad3(platform)
+    S = [prismatic_screw(u), revolute_screw(_X, A), revolute_screw(_Y, A),
+         revolute_screw(_Z, A), prismatic_screw(w)]
+    home = np.eye(4)
+    home[:3, 3] = A - b
+    return Leg(type="PSP", joints="PSP", screws=_frozen(np.array(S)),
+               names=("s", "sa", "sb", "sc", "t"), actuated=(0,), home=_frozen(home),
+               end="frame", platform_point=_frozen(b), dim=3, inventory=((1, 3, 1), 2, 0),
+               **_geo(base, platform, axis=_frozen(w), arm=_frozen(u)))
+
+
+def _positive_lengths(v: np.ndarray) -> tuple[float, ...]:
+    if np.any(v <= 0):
+        raise MechanismError(f"lengths: link lengths must be positive, got {v.tolist()}",
+                             path=("lengths", int(np.flatnonzero(v <= 0)[0])))
+    return tuple(float(x) for x in v)
+
+
+# --------------------------------------------------------------------------------------
+# a platform's legs
 
 
 def validate_legs(legs: Sequence[Any], platform: str, redundant: bool = False) -> tuple[Leg, ...]:
-    """Validate the legs of a platform: one actuated leg per degree of freedom, or (with
-    ``redundant=True``) more actuated legs than degrees of freedom (redundant actuation).
+    """Validate the legs of a platform: one actuated joint per degree of freedom, or (with
+    ``redundant=True``) more actuated joints than degrees of freedom.
 
     Platforms whose attachment points leave no regular configuration at all (see
     :func:`degenerate_points`) are rejected here, before any solver sees them.
@@ -349,34 +752,32 @@ def validate_legs(legs: Sequence[Any], platform: str, redundant: bool = False) -
     if not isinstance(platform, str) or platform not in PLATFORMS:
         raise MechanismError(
             f"platform: unknown platform kind {_show(platform)}; use one of {sorted(PLATFORMS)}",
-            path=("platform",)
-        )
+            path=("platform",))
     if isinstance(legs, (str, bytes)) or not isinstance(legs, Sequence) or not legs:
         raise MechanismError("legs: expected a non-empty list of legs", path=("legs",))
     if len(legs) > MAX_LEGS:
         raise MechanismError(f"legs: {len(legs)} legs; at most {MAX_LEGS} are supported",
                              path=("legs",))
-    dim, dof, _ = PLATFORMS[platform]
+    plat = PLATFORMS[platform]
     out = tuple(Leg.from_spec(s, i) for i, s in enumerate(legs))
     for i, leg in enumerate(out):
-        if leg.dim != dim:
+        if leg.dim != plat.space_dim and not (leg.dim == 2 and plat.space_dim == 3
+                                              and leg.end == "frame"):
             raise MechanismError(
                 f"legs[{i}].type: a {leg.type} leg is {'planar' if leg.dim == 2 else 'spatial'} "
-                f"but the platform is {platform!r}", path=("legs", i, "type")
-            )
+                f"but the platform is {platform!r}", path=("legs", i, "type"))
+    n_act = sum(len(leg.actuated) for leg in out)
+    dof = plat.dof
     if redundant:
-        if len(out) <= dof:
+        if n_act <= dof:
             raise MechanismError(
                 f"legs: a redundantly actuated {platform!r} platform needs more than {dof} "
-                f"actuated legs, got {len(out)}; drop redundant=True for {dof} legs",
-                path=("legs",)
-            )
-    elif len(out) != dof:
-        hint = "; pass redundant=True for redundant actuation" if len(out) > dof else ""
+                f"actuated joints, got {n_act}; drop redundant=True for {dof}", path=("legs",))
+    elif n_act != dof and not all(leg.end == "frame" for leg in out):
+        hint = "; pass redundant=True for redundant actuation" if n_act > dof else ""
         raise MechanismError(
             f"legs: a {platform!r} platform has {dof} degrees of freedom and needs {dof} "
-            f"actuated legs, got {len(out)}{hint}", path=("legs",)
-        )
+            f"actuated legs, got {n_act}{hint}", path=("legs",))
     bad = degenerate_points(out, platform)
     if bad is not None:
         key, idx, text = bad
@@ -394,34 +795,39 @@ def degenerate_points(legs: Sequence[Leg], platform: str
                       ) -> tuple[str, tuple[int, ...], str] | None:
     """Attachment points that make every configuration of the platform singular.
 
-    The closure row of a leg is a line (a pure force) through its platform point, and for
-    RPR/UPS/SPS legs through its base point too. When the points are placed so that these
-    lines are dependent at every pose, no closed configuration has a regular W_p: the
-    platform moves with the actuators locked everywhere (a permanent parallel singularity)
-    and the solvers have nothing to converge to. Detected:
+    The closure row of a distance leg is a line (a pure force) through its platform point,
+    and for legs whose actuated prismatic joint is the distance (RPR/UPS/SPS) through its
+    base point too. When the points are placed so that these lines are dependent at every
+    pose, no closed configuration has a regular W_p: the platform moves with the actuators
+    locked everywhere (a permanent parallel singularity) and the solvers have nothing to
+    converge to. Detected (among distance legs):
 
-    * two RPR/UPS/SPS legs with the same base and the same platform point (one line twice);
-    * planar platforms: all platform points coincide, or all base points of RPR legs do
-      (the lines all pass through one point, about which the platform turns);
-    * spatial platforms: all platform points on one line, or all base points of UPS/SPS
-      legs on one line (every leg line meets it: the platform turns about it);
-    * translational and point platforms with RPR/UPS/SPS legs: the points base - platform
-      coincide (point platforms) or lie on one line (translational): the leg directions
-      stay in one plane.
+    * two length-actuated legs with the same base and the same platform point;
+    * planar platforms: all platform points coincide, or all base points of
+      length-actuated legs do;
+    * spatial platforms: all platform points on one line, or all base points of
+      length-actuated legs on one line;
+    * translational and point platforms with length-actuated legs: the points
+      base - platform coincide (point platforms) or lie on one line (translational).
 
     Returns None, or ``(key, leg indices, explanation)`` with ``key`` "base" or "platform"
     (the points at fault), or "" for two legs that are the same.
     """
+    dist = [leg for leg in legs if leg.distance is not None and leg.base.size]
+    if len(dist) != len(legs) or not legs:
+        return None  # general chains: their closure is checked when solved
     n = len(legs)
-    prism = [leg.type in ("RPR", "UPS", "SPS") for leg in legs]
+    prism = [leg.distance.length is None for leg in legs]  # type: ignore[union-attr]
     B = np.array([leg.base for leg in legs], dtype=float)
     P = np.array([leg.platform for leg in legs], dtype=float)
+
     # "coincide" relative to the size of the points compared (base and platform points may
     # differ in size by many orders of magnitude)
     def tol(*pts: np.ndarray) -> float:
         return 1e-12 * max(max(float(np.abs(p).max()) for p in pts), 1e-300)
 
     fix = "move them apart so that the legs' lines are independent"
+
     def flat(pts: np.ndarray, k: int) -> bool:  # the points span at most k dimensions
         c = pts - pts.mean(axis=0)
         s = singular_values(c, "attachment points")
@@ -464,52 +870,3 @@ def degenerate_points(legs: Sequence[Leg], platform: str
                         "force twice, so the platform moves with the actuators locked at every "
                         f"pose; {fix}")
     return None
-
-
-
-def _empty(v: Any) -> bool:
-    """None or an empty list / tuple / array (a leg type without fixed lengths)."""
-    if v is None:
-        return True
-    try:
-        return len(v) == 0
-    except TypeError:
-        return False
-
-
-def leg_joints(leg: Leg, R: np.ndarray, p: np.ndarray, a: float) -> np.ndarray:
-    """Joint values of ``leg`` at platform pose (R, p) with its actuated joint at ``a``."""
-    P = _platform_point(leg, R, p)
-    A = leg.base
-    t = leg.type
-    if t == "RPR":
-        d = P - A
-        th = float(np.arctan2(d[1], d[0]))
-        phi = float(np.arctan2(R[1, 0], R[0, 0]))
-        return np.array([th, a, wrap_angle(phi - th)])
-    if t == "RRR":
-        l1 = leg.lengths[0]
-        phi = float(np.arctan2(R[1, 0], R[0, 0]))
-        C = A + l1 * np.array([np.cos(a), np.sin(a)])
-        e = P - C
-        th12 = float(np.arctan2(e[1], e[0]))
-        return np.array([a, wrap_angle(th12 - a), wrap_angle(phi - th12)])
-    if t in ("UPS", "SPS"):
-        d = P - A
-        n = float(np.linalg.norm(d))
-        u = d / n if n > 0 else np.array([0.0, 0.0, 1.0])
-        ub = float(np.arcsin(np.clip(u[0], -1, 1)))
-        ua = float(np.arctan2(-u[1], u[2]))
-        RS = (rot_x(ua) @ rot_y(ub)).T @ R
-        return np.concatenate([[ua, ub, a], euler_xyz(RS)])
-    la = leg.lengths[0]
-    u0, ax = leg.arm, leg.axis
-    w = np.cross(ax, u0)  # type: ignore[arg-type]
-    armv = np.cos(a) * u0 + np.sin(a) * w
-    C = A + la * armv
-    v = P - C
-    n = float(np.linalg.norm(v))
-    v = v / n if n > 0 else armv
-    F = np.column_stack([armv, ax, np.cross(armv, ax)])
-    vl = F.T @ v
-    return np.array([a, float(np.arctan2(-vl[1], vl[2])), float(np.arcsin(np.clip(vl[0], -1, 1)))])

@@ -463,11 +463,13 @@ class FastFn:
     you keep. Not thread-safe: keep one per thread (``Model.fast`` does).
 
     Matrix arguments are column-major: pass an (n, m) C-ordered array for an (m, n) input.
+    ``fixed`` values fill the last inputs once (a model's geometry vector): calls then pass
+    only the leading inputs.
     """
 
-    __slots__ = ("f", "_buf", "_trig", "_args", "_res", "_dense")
+    __slots__ = ("f", "_buf", "_trig", "_args", "_res", "_dense", "_fixed")
 
-    def __init__(self, f: ca.Function) -> None:
+    def __init__(self, f: ca.Function, fixed: Sequence[np.ndarray] = ()) -> None:
         self.f = f
         self._buf, self._trig = f.buffer()
         self._args = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
@@ -477,6 +479,9 @@ class FastFn:
         for i, r in enumerate(self._res):
             self._buf.set_res(i, memoryview(r))
         self._dense: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._fixed = len(fixed)
+        for k, v in enumerate(fixed):
+            self._args[f.n_in() - len(fixed) + k][:] = np.ravel(v, order="F")
 
     def dense(self, i: int) -> np.ndarray:
         """Output ``i`` of the last call as a new dense (n1, n2) array."""
@@ -503,7 +508,8 @@ class FastFn:
         return self._res
 
     def into(self, args: Sequence[np.ndarray], res: Sequence[np.ndarray]) -> None:
-        """Evaluate with caller-owned contiguous float64 arrays (no copies)."""
+        """Evaluate with caller-owned contiguous float64 arrays (no copies; the fixed
+        inputs keep their values)."""
         for i, a in enumerate(args):
             self._buf.set_arg(i, memoryview(a))
         for i, r in enumerate(res):

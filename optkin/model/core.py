@@ -1,10 +1,18 @@
-"""The kinematic model: a mechanism compiled once into CasADi Functions.
+"""The kinematic model: one frozen interface over every mechanism, geometry as a parameter.
 
-``get_model(mech)`` returns the cached :class:`Model` of a mechanism (keyed by its content
-hash, so a worker process that sees the same description twice builds it once). The model
-holds the closure residual Phi(q_a, x) with independent rows [7.8]/[7.9], its Jacobians
-W_p = dPhi/dx and W_a = dPhi/dq_a [7.49], a clamped Newton step (the algorithm of 7.9),
-the end-effector pose, and lazily the IPOPT solver of the direct geometric model.
+``get_model(mech)`` returns the :class:`Model` of a mechanism. A model binds the numbers of
+the mechanism (its geometry vector p) to the :class:`Topology` it shares with every
+mechanism of the same structure: CasADi Functions of the closure residual Phi(q_a, x; p)
+with independent rows [7.8]/[7.9], its Jacobians W_p = dPhi/dx and W_a = dPhi/dq_a
+[7.49], a clamped Newton step (7.9), the end-effector pose, every joint value, the
+joint-level closure, and lazily the compiled code, batch maps, the IPOPT solver of the
+direct model and whatever a solver or analysis builds per topology (:meth:`Model.cached`).
+A new geometry of a known topology compiles nothing.
+
+Solvers and analyses see only this interface: names, scales and angle flags of the
+unknowns, row names and the leg each row belongs to, conversions between joint values,
+unknowns, poses and task coordinates, and the evaluators of the topology's Functions with
+the geometry filled in. Models are immutable; :func:`clear_cache` empties every cache.
 """
 
 from __future__ import annotations
@@ -13,6 +21,8 @@ import hashlib
 import math
 import threading
 import time
+from collections import OrderedDict
+from collections.abc import Callable, Hashable
 from typing import Any
 
 import casadi as ca
@@ -21,433 +31,204 @@ import numpy as np
 from .._cache import KeyedCache
 from ..errors import MechanismError
 from ..mechanism import Mechanism
-from ..mechanism.geometry import homogeneous, matrix_to_quat, quat_to_matrix, rot2
-from ..mechanism.legs import leg_forward, leg_joints
+from ..mechanism.platforms import PLATFORMS
 from . import compiled as cc
 from . import fused
-from . import khalil as kh
-from . import legs as lg
+from .structure import Structure, build_structure
 
-__all__ = ["Model", "get_model", "clear_cache"]
+__all__ = ["Model", "Topology", "get_model", "clear_cache"]
 
-_CACHE: KeyedCache[Model] = KeyedCache()
 #: forward() calls on one model after which it is compiled (OPTKIN_COMPILE=auto)
 HOT_USES = 100
+#: Geometry-bound models kept (least recently used first out); topologies are all kept.
+MAX_MODELS = 512
+
+_STRUCTURES: KeyedCache[Structure] = KeyedCache()
+_TOPOLOGIES: KeyedCache[Topology] = KeyedCache()
+_MODELS: OrderedDict[str, Model] = OrderedDict()
+_MODELS_LOCK = threading.Lock()
 
 
 def get_model(mech: Mechanism) -> Model:
-    """The compiled model of ``mech``, built on first use and cached by content."""
+    """The model of ``mech``: its topology's Functions with its geometry filled in."""
     if not isinstance(mech, Mechanism):
         raise MechanismError(
             f"expected an optkin Mechanism, got {type(mech).__name__}; build one with "
             "optkin.mechanisms.* or Mechanism.from_khalil / from_legs"
         )
-    return _CACHE.get(mech.key, lambda: Model(mech))
+    with _MODELS_LOCK:
+        m = _MODELS.get(mech.key)
+        if m is not None:
+            _MODELS.move_to_end(mech.key)
+            return m
+    m = Model(mech)
+    with _MODELS_LOCK:
+        m = _MODELS.setdefault(mech.key, m)
+        while len(_MODELS) > MAX_MODELS:
+            _MODELS.popitem(last=False)
+    return m
 
 
 def clear_cache() -> None:
-    _CACHE.clear()
+    """Forget every model, topology and everything built per topology."""
+    with _MODELS_LOCK:
+        _MODELS.clear()
+    _TOPOLOGIES.clear()
+    _STRUCTURES.clear()
 
 
 def _length_scale(mech: Mechanism) -> float:
-    vals: list[float] = []
     if mech.kind == "khalil":
-        for f in mech.table.frames:
-            vals += [abs(f.b), abs(f.d), abs(f.r)]
+        vals = [abs(v) for f in mech.table.frames for v in (f.b, f.d, f.r)]
     else:
+        vals = []
         for leg in mech.legs:
             vals += list(np.abs(leg.base)) + list(np.abs(leg.platform)) + list(leg.lengths)
+            if not leg.base.size:  # a chain from screws: its home positions
+                vals += list(np.abs(leg.home[:3, 3])) + list(np.abs(leg.platform_point))
     v = max(vals) if vals else 1.0
     return v if v > 0 else 1.0
 
 
-class Model:
-    """CasADi Functions of one mechanism. Build with :func:`get_model`."""
+def _select_rows(st: Structure, p: np.ndarray, mech: Mechanism, samples: int = 4,
+                 seed: int = 7) -> list[int]:
+    """Independent closure rows, by rank over random configurations (with these numbers).
 
-    def __init__(self, mech: Mechanism) -> None:
-        t0 = time.perf_counter()
-        self.mech = mech
-        self.length = _length_scale(mech)
-        na = mech.n_actuated  # = dof unless the mechanism is redundantly actuated
-        self.na = na
-        qa = ca.SX.sym("qa", na)
-        self._nlp: Any = None
-        self._inv: Any = None
-        self._batch: dict[int, ca.Function] = {}
-        if mech.kind == "khalil":
-            self.passive_index = np.flatnonzero(~np.array(mech.actuated))
-            nx = self.passive_index.size
-            x = ca.SX.sym("x", nx)
-            q = self._assemble_sx(qa, x)
-            T = kh.frames_0(mech, q)
-            rows, names = kh.closure_rows(mech, T)
-            qfull = ca.SX.sym("q", len(mech.joint_names))
-            Tf = kh.frames_0(mech, qfull)
-            rows_f, _ = kh.closure_rows(mech, Tf)
-            keep = kh.select_rows(mech, qfull, rows_f, names)
-            if len(keep) < nx:
+    A row whose gradient vanishes everywhere (a planar loop's out-of-plane rows) or that is
+    a combination of kept rows at every sample is dropped. A dropped row whose value is a
+    non-zero constant means the loop can never close: that is a description error.
+    """
+    phi = st.phi
+    if phi.shape[0] == 0:
+        return []
+    v = ca.vertcat(st.qa, st.x)
+    f = ca.Function("rows", [v, st.p], [phi, ca.jacobian(phi, v)])
+    rng = np.random.default_rng(seed)
+    n = v.shape[0]
+    L = float(p[-1])
+    is_len = np.concatenate([np.zeros(st.qa.shape[0], bool), st.x_length])
+    vals, jacs = [], []
+    for _ in range(samples):
+        z = rng.uniform(-np.pi, np.pi, n)
+        z = np.where(is_len, z * L / np.pi, z)
+        out = f(z, p)
+        vals.append(np.array(out[0]).ravel())
+        jacs.append(np.array(out[1]))
+    G = np.hstack(jacs)
+    if not np.all(np.isfinite(G)):
+        raise MechanismError("the closure rows are not finite at random configurations; "
+                             "check the geometry", path=())
+    scale = max(1.0, float(np.abs(G).max()))
+    kept: list[int] = []
+    basis = np.zeros((0, G.shape[1]))
+    for i in range(G.shape[0]):
+        cand = np.vstack([basis, G[i]])
+        if np.linalg.matrix_rank(cand, tol=1e-9 * scale) > basis.shape[0]:
+            kept.append(i)
+            basis = cand
+        elif np.allclose(G[i], 0.0, atol=1e-12 * scale):
+            const = np.array([vv[i] for vv in vals])
+            if np.all(np.isfinite(const)) and np.max(np.abs(const)) > 1e-9:
                 raise MechanismError(
-                    f"the loops give {len(keep)} independent closure equations for {nx} passive "
-                    f"joints: the mechanism has {nx - len(keep)} more degree(s) of freedom than "
-                    "actuated joints; actuate more joints (mu=1) or add loops"
-                )
-            phi = rows[keep] if keep else ca.SX(0, 1)
-            self.row_names = [names[i] for i in keep]
-            self.x_names = tuple(mech.joint_names[i] for i in self.passive_index)
-            self.x_angle = np.array([mech.revolute[i] for i in self.passive_index], dtype=bool)
-            self.x_scale = np.where(self.x_angle, 1.0, self.length)
-            Tee = T[mech.end_effector]
-            self._T_all = T
-            self._q_sym = q
-        else:
-            nx = lg.x_dim(mech.platform)
-            x = ca.SX.sym("x", nx)
-            phi, self.row_names = lg.leg_rows(mech, qa, x)
-            R, p = lg.platform_frame(mech.platform, x)
-            Tee = ca.vertcat(ca.horzcat(R, p), ca.horzcat(0, 0, 0, 1))
-            coords = {"planar": ("x", "y", "phi"), "planar_point": ("x", "y"),
-                      "spatial": ("x", "y", "z", "qw", "qx", "qy", "qz"),
-                      "spatial_translational": ("x", "y", "z")}[mech.platform]
-            self.x_names = coords
-            self.x_angle = np.array([c == "phi" for c in coords], dtype=bool)
-            self.x_scale = np.array(
-                [1.0 if (c == "phi" or c.startswith("q")) else self.length for c in coords]
-            )
-            self.passive_index = np.flatnonzero(~np.array(mech.actuated))
-        self.nx = nx
+                    f"{st.row_names[i]}: this closure row is the constant {const[0]:.6g} for "
+                    "every configuration, so the loop can never close; check the offsets "
+                    "(b, r, d) of the frames of this loop")
+    return kept
+
+
+class Topology:
+    """The Functions of one mechanism topology, with the geometry p as their last input.
+
+    Shared by every mechanism of the structure (:attr:`Mechanism.topology`) and the same
+    independent rows; compiled once. Everything a solver or analysis builds lazily for a
+    topology lives in :meth:`cached`.
+    """
+
+    def __init__(self, st: Structure, keep: list[int], key: str, redundant: bool) -> None:
+        self.st = st
+        self.key = key
+        self.keep = tuple(keep)
+        qa, x, p = st.qa, st.x, st.p
+        self.na, self.nx = int(qa.shape[0]), int(x.shape[0])
+        phi = st.phi[list(keep)] if keep else ca.SX(0, 1)
         self.m = int(phi.shape[0])
-        self.qa_sym, self.x_sym, self.phi_sym = qa, x, phi
+        if self.m < self.nx:
+            raise MechanismError(
+                f"the loops give {self.m} independent closure equations for {self.nx} "
+                f"unknowns: the mechanism has {self.nx - self.m} more degree(s) of freedom "
+                "than actuated joints; actuate more joints or add loops")
+        if self.m > self.nx and not redundant:
+            raise MechanismError(
+                f"the loops give {self.m} independent closure equations for {self.nx} "
+                "unknowns: the actuated joints are over-constrained; actuate fewer joints, "
+                "or pass redundant=True for redundant actuation")
+        self.row_names = [st.row_names[i] for i in keep]
+        self.row_length = st.row_length[list(keep)] if keep else np.zeros(0, bool)
+        self.row_leg = st.row_leg[list(keep)] if keep else np.zeros(0, int)
+        self.phi_sym = phi
+        # the scale of every unknown: lengths scale with the mechanism (p[-1])
+        L = p[p.shape[0] - 1]
+        self.x_scale_sym = ca.vertcat(*[L if st.x_length[i] else ca.SX(1)
+                                        for i in range(self.nx)]) if self.nx else ca.SX(0, 1)
         Wp = ca.jacobian(phi, x)
         Wa = ca.jacobian(phi, qa)
-        self.phi = ca.Function("Phi", [qa, x], [phi], ["qa", "x"], ["Phi"])
-        self.jac = ca.Function("W", [qa, x], [phi, Wp, Wa], ["qa", "x"], ["Phi", "W_p", "W_a"])
-        self.pose_fn = ca.Function("pose", [qa, x], [Tee], ["qa", "x"], ["T"])
-        # damped Newton step (7.9): dx = -W_p^+ Phi with a line search on |Phi|
-        if self.m == nx:
+        self.phi = ca.Function("Phi", [qa, x, p], [phi], ["qa", "x", "p"], ["Phi"])
+        self.jac = ca.Function("W", [qa, x, p], [phi, Wp, Wa], ["qa", "x", "p"],
+                               ["Phi", "W_p", "W_a"])
+        self.pose_fn = ca.Function("pose", [qa, x, p], [st.T], ["qa", "x", "p"], ["T"])
+        if self.m == self.nx:
             dx = -ca.solve(Wp, phi)
         else:
             dx = -ca.solve(ca.mtimes(Wp.T, Wp), ca.mtimes(Wp.T, phi))
-        fphi = ca.Function("Phi_x", [x, qa], [phi])
-        xn = damped_step(fphi, x, dx, self.x_scale, [qa])
+        fphi = ca.Function("Phi_x", [x, qa, p], [phi])
+        xn = damped_step(fphi, x, dx, self.x_scale_sym, [qa, p])
         res = ca.mmax(ca.fabs(phi)) if self.m else ca.SX(0)
-        self.step = ca.Function("newton_step", [qa, x], [xn, res], ["qa", "x"], ["x_next", "res"])
-        # compiled twins (optkin.model.compiled): loaded from the disk cache when present
-        self.step_sx = self.step  # the interpreted step (for symbolic use)
-        self.compiled_step: ca.Function | None = None
+        self.step_sx = ca.Function("newton_step", [qa, x, p], [xn, res], ["qa", "x", "p"],
+                                   ["x_next", "res"])
+        self.q_fn = ca.Function("q", [qa, x, p], [st.q], ["qa", "x", "p"], ["q"])
+        self.result_sx = fused.result_function(self)
         self.compiled_fns: dict[str, ca.Function] = {}
-        self.uses = 0
-        self._tls = threading.local()
-        self._gen = 0
-        self._result_fn: ca.Function | None = None
-        self._tracker: dict[tuple[int, int], ca.Function] = {}
-        self._guard: dict[int, ca.Function] = {}
-        self._compile_lock = threading.Lock()
+        self._store: dict[Hashable, Any] = {}
+        self._lock = threading.RLock()
         self._compile_failed = False
-        mode = cc.compile_mode()
-        if mode != "off":
-            self.compile(build=mode == "eager")
-        self.build_time = time.perf_counter() - t0
 
-    # -------------------------------------------------------------- conversions
-    def _assemble_sx(self, qa, x):
-        parts = []
-        ia = ip = 0
-        for a in self.mech.actuated:
-            if a:
-                parts.append(qa[ia])
-                ia += 1
-            else:
-                parts.append(x[ip])
-                ip += 1
-        return ca.vertcat(*parts)
-
-    def residual(self, qa: np.ndarray, x: np.ndarray) -> np.ndarray:
-        return np.array(self.phi(qa, x)).ravel()
-
-    def pose(self, qa: np.ndarray, x: np.ndarray) -> np.ndarray:
-        return np.array(self.pose_fn(qa, x))
-
-    def to_q(self, qa: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """All joint values (``mech.joint_names`` order) from q_a and the unknowns x."""
-        mech = self.mech
-        q = np.empty(len(mech.joint_names))
-        act = np.array(mech.actuated)
-        q[act] = qa
-        if mech.kind == "khalil":
-            q[~act] = x
-            return q
-        T = self.pose(qa, x)
-        R, p = T[:3, :3], T[:3, 3]
-        if mech.planar:
-            R, p = R[:2, :2], p[:2]
-        i = 0
-        for k, leg in enumerate(mech.legs):
-            n = len(leg.joint_names)
-            q[i:i + n] = leg_joints(leg, R, p, float(qa[k]))
-            i += n
-        return q
-
-    def qa_of(self, q: np.ndarray) -> np.ndarray:
-        return np.asarray(q, dtype=float)[np.array(self.mech.actuated)]
-
-    def x_from_q(self, q: np.ndarray) -> np.ndarray:
-        """The unknowns x of a full joint vector (legs: mean of each leg's chain pose)."""
-        mech = self.mech
-        q = np.asarray(q, dtype=float)
-        if mech.kind == "khalil":
-            return q[self.passive_index].copy()
-        Rs, ps = [], []
-        i = 0
-        pp = mech.platform in ("planar_point", "spatial_translational")
-        for leg in mech.legs:
-            n = len(leg.joint_names)
-            R, p = leg_forward(leg, q[i:i + n], planar_point=pp)
-            Rs.append(R)
-            ps.append(p)
-            i += n
-        p = np.mean(ps, axis=0)
-        if mech.planar:
-            phis = [np.arctan2(R[1, 0], R[0, 0]) for R in Rs]
-            phi = float(np.arctan2(np.mean(np.sin(phis)), np.mean(np.cos(phis))))
-            return self.x_from_pose(homogeneous(rot2(phi), p))
-        quats = [matrix_to_quat(R) for R in Rs]
-        ref = quats[0]
-        qm = np.mean([qq if qq @ ref >= 0 else -qq for qq in quats], axis=0)
-        return self.x_from_pose(homogeneous(quat_to_matrix(qm), p))
-
-    def x_from_pose(self, T: np.ndarray) -> np.ndarray:
-        """The unknowns x of a platform pose (leg-described mechanisms)."""
-        mech = self.mech
-        T = np.asarray(T, dtype=float)
-        if mech.kind == "khalil":
-            raise MechanismError(
-                "guess: a pose cannot seed a Khalil mechanism's direct model; give joint values"
-            )
-        plat = mech.platform
-        if plat == "planar":
-            return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
-        if plat == "planar_point":
-            return T[:2, 3].copy()
-        if plat == "spatial":
-            return np.concatenate([T[:3, 3], matrix_to_quat(T[:3, :3])])
-        return T[:3, 3].copy()
-
-    def canonical_x(self, x: np.ndarray) -> np.ndarray:
-        """Angles wrapped to (-pi, pi], quaternions normalised with w >= 0."""
-        x = np.array(x, dtype=float)
-        idx = self.__dict__.get("_angle_idx")
-        if idx is None:
-            idx = self._angle_idx = [int(i) for i in np.flatnonzero(self.x_angle)]
-        for i in idx:  # scalar wrap_angle: a few angles, no array overhead
-            a = math.remainder(x[i], 2 * math.pi) if math.isfinite(x[i]) else x[i]
-            x[i] = math.pi if a <= -math.pi else a
-        if self.mech.kind == "legs" and self.mech.platform == "spatial":
-            qq = x[3:7] / math.sqrt(float(x[3:7] @ x[3:7]))
-            x[3:7] = qq if qq[0] >= 0 else -qq
-        return x
-
-    def default_x(self, qa: np.ndarray) -> np.ndarray:
-        """A default starting point: the mechanism's home, else a central configuration."""
-        mech = self.mech
-        if mech.kind == "khalil":
-            if mech.home is not None:
-                return mech.home[self.passive_index].copy()
-            return np.full(self.nx, 0.1)
-        if mech.home is not None:
-            from ..mechanism.tasks import task_to_pose
-
-            return self.x_from_pose(task_to_pose(mech, mech.home))
-        base = np.mean([leg.base for leg in mech.legs], axis=0)
-        plat = np.mean([leg.platform for leg in mech.legs], axis=0)
-        p = base - plat
-        if mech.platform == "planar":
-            return np.array([p[0], p[1], 0.0])
-        if mech.platform == "planar_point":
-            return p[:2] + np.array([0.0, 0.5 * self.length])
-        reach = float(np.mean(qa)) if mech.legs[0].type in ("UPS", "SPS") else -0.7 * sum(
-            mech.legs[0].lengths)
-        p = p + np.array([0.0, 0.0, reach])
-        if mech.platform == "spatial":
-            return np.concatenate([p, [1.0, 0.0, 0.0, 0.0]])
-        return p
-
-    # -------------------------------------------------------------- compiled code
-    def __reduce__(self):
-        return (get_model, (self.mech,))
+    # -------------------------------------------------------------- per-topology store
+    def cached(self, key: Hashable, build: Callable[[], Any]) -> Any:
+        """``build()`` once per key for this topology (thread-safe)."""
+        v = self._store.get(key)
+        if v is None:
+            with self._lock:
+                v = self._store.get(key)
+                if v is None:
+                    v = build()
+                    self._store[key] = v
+        return v
 
     @property
     def compiled(self) -> bool:
-        """True when the compiled C Functions are in use."""
-        return self.compiled_step is not None
+        return "newton_step" in self.compiled_fns
 
-    def result_fn(self) -> ca.Function:
-        """(q_a, x) -> (Phi, W_p, T, q) in one evaluation (compiled when available)."""
-        f = self.compiled_fns.get("result")
-        if f is None:
-            if self._result_fn is None:
-                self._result_fn = fused.result_function(self)
-            f = self._result_fn
-        return f
+    def core_functions(self) -> list[ca.Function]:
+        return [self.phi, self.jac, self.step_sx, self.pose_fn, self.result_sx]
 
-    def compile(self, build: bool = True, tracker: tuple[int, int] | None = None,
-                guard: int | None = None) -> bool:
-        """Use compiled C versions of the step, residual, Jacobians, pose and result.
-
-        Loads them from the disk cache, or (``build=True``) generates and compiles them
-        with the system C compiler (see :mod:`optkin.model.compiled`). ``step`` becomes the
-        compiled Newton step; ``phi``, ``jac`` and ``pose_fn`` stay the SX Functions (they
-        are used symbolically), their compiled twins are in ``compiled_fns``. ``tracker``
-        = (chunk, iters) also prepares :meth:`tracker`, the two libraries being compiled
-        in parallel; ``guard`` = chunk likewise prepares :meth:`guard`. Returns whether
-        compiled code is in use; without a compiler nothing changes.
-        """
-        want_tr = tracker is not None and (int(tracker[0]), int(tracker[1])) not in self._tracker
-        want_g = guard is not None and int(guard) not in self._guard
-        if self.compiled_step is not None and not want_tr and not want_g:
-            return True
-        if self._compile_failed and build:
-            return False
-        with self._compile_lock:
+    def compile(self, build: bool = True, extra: list[tuple[str, list[ca.Function]]] = ()
+                ) -> list[dict[str, ca.Function] | None]:
+        """Load (or build) the compiled twins of the core Functions and of ``extra``
+        libraries; returns the extra libraries (None where compiling is unavailable)."""
+        with self._lock:
             reqs: list[tuple[str, list[ca.Function]]] = []
-            if self.compiled_step is None:
-                if self._result_fn is None:
-                    self._result_fn = fused.result_function(self)
-                reqs.append(("core:" + self.mech.key,
-                             [self.phi, self.jac, self.step_sx, self.pose_fn, self._result_fn]))
-            if want_tr:
-                f_tr = self._tracker_sx(*tracker)
-                reqs.append((self._tracker_tag(*tracker), [f_tr]))
-            if want_g:
-                f_g, tag_g = self._guard_sx(int(guard))
-                reqs.append((tag_g, [f_g]))
-            libs = cc.libraries(reqs, build=build)
-            if want_g:
-                lib_g = libs.pop()
-                self._guard[int(guard)] = lib_g[f_g.name()] if lib_g is not None else f_g
-            if want_tr:
-                lib_tr = libs[-1]
-                self._tracker[(int(tracker[0]), int(tracker[1]))] = (
-                    lib_tr[f_tr.name()] if lib_tr is not None else f_tr)
-            if self.compiled_step is None:
-                lib = libs[0]
+            want_core = not self.compiled and not (self._compile_failed and build)
+            if want_core:
+                reqs.append(("core:" + self.key, self.core_functions()))
+            reqs += list(extra)
+            libs = cc.libraries(reqs, build=build) if reqs else []
+            if want_core:
+                lib = libs.pop(0)
                 if lib is None:
                     self._compile_failed = build
-                    return False
-                self.compiled_fns = lib
-                self.step = lib["newton_step"]
-                self._batch = {}
-                self._gen += 1
-                self.compiled_step = lib["newton_step"]
-        return True
-
-    def note_use(self) -> None:
-        """Count a solve; compile (``OPTKIN_COMPILE=auto``) once the model is in heavy use."""
-        self.uses += 1
-        if self.uses == HOT_USES and self.compiled_step is None and cc.compile_mode() != "off":
-            self.compile()
-
-    def fast(self, name: str) -> cc.FastFn:
-        """A per-thread buffered evaluator of ``newton_step``, ``result``, ``Phi``, ``W``,
-        ``pose`` (compiled when available); outputs are reused buffers, copy what you keep."""
-        d = getattr(self._tls, "d", None)
-        if d is None or self._tls.gen != self._gen:
-            d = self._tls.d = {}
-            self._tls.gen = self._gen
-        ev = d.get(name)
-        if ev is None:
-            f = self.compiled_fns.get(name)
-            if f is None:
-                interp = {"newton_step": self.step_sx, "Phi": self.phi, "W": self.jac,
-                          "pose": self.pose_fn}
-                f = interp[name] if name in interp else self.result_fn()
-            ev = d[name] = cc.FastFn(f)
-        return ev
-
-    def compiled_batch_step(self, n: int) -> ca.Function:
-        """The compiled Newton step mapped over n columns (threads); compiles if needed,
-        falls back to the interpreted step without a compiler."""
-        self.compile()
-        return self.batch_step(n)
-
-    def _tracker_sx(self, chunk: int, iters: int) -> ca.Function:
-        one = fused.tracker_function(self, int(iters))
-        return one.mapaccum(f"track_{int(chunk)}_{int(iters)}", int(chunk), 2)
-
-    def _tracker_tag(self, chunk: int, iters: int) -> str:
-        return f"track:{self.mech.key}:{int(chunk)}:{int(iters)}"
-
-    def tracker(self, chunk: int, iters: int = 2) -> tuple[ca.Function, bool]:
-        """The path tracker of ``forward_batch`` over ``chunk`` points (``mapaccum`` of
-        :func:`optkin.model.fused.tracker_function`), and whether it is compiled."""
-        key = (int(chunk), int(iters))
-        f = self._tracker.get(key)
-        if f is None:
-            f = self._tracker_sx(chunk, iters)
-            lib = cc.library(self._tracker_tag(chunk, iters), [f])
-            if lib is not None:
-                f = lib[f.name()]
-            self._tracker[key] = f
-        return f, f.is_a("External")
-
-    def _guard_sx(self, chunk: int) -> tuple[ca.Function, str]:
-        """The mapped guard and its cache tag (which hashes the inner Function: the
-        signature of a mapped Function does not change with its body)."""
-        one = fused.guard_function(self)
-        body = hashlib.sha256(one.serialize().encode()).hexdigest()[:16]
-        f = one.map(f"guard_{int(chunk)}", "serial", int(chunk), [], [])
-        return f, f"guard:{self.mech.key}:{int(chunk)}:{body}"
-
-    def guard(self, chunk: int) -> tuple[ca.Function, bool]:
-        """What ``forward_batch`` checks its rows with (det W_p, conditioning,
-        W_p^-1 W_a; :func:`optkin.model.fused.guard_function`) mapped over ``chunk`` rows,
-        and whether it is compiled."""
-        f = self._guard.get(int(chunk))
-        if f is None:
-            f, tag = self._guard_sx(chunk)
-            lib = cc.library(tag, [f])
-            if lib is not None:
-                f = lib[f.name()]
-            self._guard[int(chunk)] = f
-        return f, f.is_a("External")
-
-    # -------------------------------------------------------------- solvers
-    def batch_step(self, n: int) -> ca.Function:
-        """The Newton step mapped over n columns (threads); compiled when available."""
-        f = self._batch.get(n)
-        if f is None:
-            f = self.step.map(n, "thread", 2)
-            self._batch[n] = f
-        return f
-
-    def nlp(self) -> Any:
-        """The IPOPT solver of the direct model: min |(x - x_guess)/scale|^2 s.t. Phi = 0
-        (redundantly actuated platforms: min |Phi|^2, unconstrained)."""
-        if self._nlp is None:
-            x = self.x_sym
-            p = ca.SX.sym("p", self.na + self.nx)
-            qa, xg = p[: self.na], p[self.na:]
-            phi = ca.substitute(self.phi_sym, self.qa_sym, qa)
-            f = ca.sumsqr((x - xg) / self.x_scale)
-            g = phi
-            if self.m > self.nx:
-                # redundant actuation: more closure rows than unknowns; IPOPT refuses an
-                # overdetermined equality system, so minimise |Phi|^2 (a tiny pull towards the
-                # guess keeps the Hessian regular) and let the Newton polish decide success
-                f = ca.sumsqr(phi) + 1e-10 * f
-                g = ca.SX(0, 1)
-            opts = {
-                "ipopt.print_level": 0,
-                "ipopt.sb": "yes",
-                "print_time": False,
-                "ipopt.tol": 1e-12,
-                "ipopt.constr_viol_tol": 1e-12,
-                "ipopt.max_iter": 300,
-                "error_on_fail": False,
-            }
-            t0 = time.perf_counter()
-            self._nlp = ca.nlpsol("forward", "ipopt", {"x": x, "p": p, "f": f, "g": g}, opts)
-            self.nlp_build_time = time.perf_counter() - t0
-        return self._nlp
+                else:
+                    self.compiled_fns = lib
+            return libs
 
 
 def damped_step(F, z, dz, scale, params, max_step: float = 1.0):
@@ -467,3 +248,479 @@ def damped_step(F, z, dz, scale, params, max_step: float = 1.0):
             best = ca.if_else(better, zc, best)
             nb = ca.if_else(better, nc, nb)
     return best
+
+
+def _topology_for(mech: Mechanism, p: np.ndarray) -> Topology:
+    st = _STRUCTURES.get(mech.topology, lambda: build_structure(mech))
+    keep = _select_rows(st, p, mech)
+    full = (mech.topology, tuple(keep))
+    key = hashlib.sha256(repr(full).encode()).hexdigest()[:16]
+    return _TOPOLOGIES.get(full, lambda: Topology(st, keep, key, mech.redundant))
+
+
+class Model:
+    """A mechanism's Functions with its geometry filled in. Build with :func:`get_model`.
+
+    Attributes
+    ----------
+    mech : Mechanism
+    topology : Topology
+        The shared Functions (their last input is the geometry :attr:`p`).
+    p : ndarray
+        The geometry vector (read-only), the mechanism's length scale last.
+    na, nx, m : int
+        Actuated joints, unknowns, independent closure rows.
+    x_names, x_angle, x_scale :
+        Names of the unknowns, which are angles, and their scales (lengths: the
+        mechanism's size; angles and unit quaternions: 1).
+    row_names, row_leg, row_length :
+        The closure rows: names, the leg each belongs to (-1 for none), which are lengths.
+    length : float
+        The mechanism's size (largest offset or length of its description).
+    """
+
+    __slots__ = ("mech", "topology", "p", "length", "na", "nx", "m", "x_names", "x_angle",
+                 "x_scale", "row_names", "row_leg", "row_length", "passive_index", "qp_index", "qc_index",
+                 "qa_positive", "build_time", "_tls", "_uses", "_frozen", "__weakref__")
+
+    def __init__(self, mech: Mechanism) -> None:
+        t0 = time.perf_counter()
+        set_ = object.__setattr__
+        set_(self, "mech", mech)
+        L = _length_scale(mech)
+        p = np.concatenate([mech.geometry, [L]])
+        p.setflags(write=False)
+        topo = _topology_for(mech, p)
+        st = topo.st
+        set_(self, "topology", topo)
+        set_(self, "p", p)
+        set_(self, "length", L)
+        set_(self, "na", topo.na)
+        set_(self, "nx", topo.nx)
+        set_(self, "m", topo.m)
+        set_(self, "x_names", tuple(st.x_names))
+        xa = np.array(st.x_angle, dtype=bool)
+        xa.setflags(write=False)
+        set_(self, "x_angle", xa)
+        xs = np.where(st.x_length, L, 1.0)
+        xs.setflags(write=False)
+        set_(self, "x_scale", xs)
+        set_(self, "row_names", list(topo.row_names))
+        set_(self, "row_leg", topo.row_leg.copy())
+        set_(self, "row_length", topo.row_length.copy())
+        act = np.array(mech.actuated, dtype=bool)
+        set_(self, "passive_index", np.flatnonzero(~act))
+        cut = set(mech.cut_names)
+        is_cut = np.array([n in cut for n in mech.joint_names], dtype=bool)
+        set_(self, "qp_index", np.flatnonzero(~act & ~is_cut))
+        set_(self, "qc_index", np.flatnonzero(is_cut))
+        qpos = np.zeros(topo.na, dtype=bool)
+        if mech.kind == "legs":
+            k = 0
+            for leg in mech.legs:
+                for a in leg.actuated:
+                    qpos[k] = leg.distance is not None and leg.distance.length is None \
+                        and leg.kinds[a] == "P"
+                    k += 1
+        set_(self, "qa_positive", qpos)
+        set_(self, "_tls", threading.local())
+        set_(self, "_uses", [0])
+        mode = cc.compile_mode()
+        if mode != "off":
+            topo.compile(build=mode == "eager")
+        set_(self, "build_time", time.perf_counter() - t0)
+        set_(self, "_frozen", True)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError("a Model is immutable; per-topology data goes in Model.cached")
+
+    def __reduce__(self):
+        return (get_model, (self.mech,))
+
+    # -------------------------------------------------------------- structure
+    @property
+    def structure(self) -> Structure:
+        return self.topology.st
+
+    @property
+    def platform(self):
+        """The platform kind class (legs), or None (Khalil tables)."""
+        st = self.topology.st
+        return PLATFORMS[st.platform] if st.platform else None
+
+    @property
+    def n_platform(self) -> int:
+        """How many leading unknowns are the platform's coordinates (0 for Khalil)."""
+        return self.topology.st.n_platform
+
+    @property
+    def symbols(self) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+        """(q_a, x, p, Phi) as SX: build Functions with p as an input and call them with
+        :attr:`p` (or through :meth:`bind`)."""
+        t = self.topology
+        return t.st.qa, t.st.x, t.st.p, t.phi_sym
+
+    def cached(self, key: Hashable, build: Callable[[], Any]) -> Any:
+        """Something built once per topology (Functions, maps, masks)."""
+        return self.topology.cached(key, build)
+
+    def bind(self, f: ca.Function) -> Callable[..., Any]:
+        """``f`` with its last input (the geometry) filled in."""
+        p = self.p
+
+        def call(*args: Any) -> Any:
+            return f(*args, p)
+
+        return call
+
+    # -------------------------------------------------------------- evaluations
+    @property
+    def phi(self) -> Callable[..., Any]:
+        return self.bind(self.topology.phi)
+
+    @property
+    def jac(self) -> Callable[..., Any]:
+        return self.bind(self.topology.jac)
+
+    @property
+    def pose_fn(self) -> Callable[..., Any]:
+        return self.bind(self.topology.pose_fn)
+
+    def residual(self, qa: np.ndarray, x: np.ndarray) -> np.ndarray:
+        return np.array(self.topology.phi(qa, x, self.p)).ravel()
+
+    def pose(self, qa: np.ndarray, x: np.ndarray) -> np.ndarray:
+        return np.array(self.topology.pose_fn(qa, x, self.p))
+
+    def fast(self, name: str) -> cc.FastFn:
+        """A per-thread buffered evaluator of ``newton_step``, ``result``, ``Phi``, ``W``,
+        ``pose`` (compiled when available), the geometry filled in; outputs are reused
+        buffers, copy what you keep."""
+        topo = self.topology
+        d = getattr(self._tls, "d", None)
+        gen = len(topo.compiled_fns)
+        if d is None or self._tls.gen != gen:
+            d = self._tls.d = {}
+            self._tls.gen = gen
+        ev = d.get(name)
+        if ev is None:
+            f = topo.compiled_fns.get(name)
+            if f is None:
+                f = {"newton_step": topo.step_sx, "Phi": topo.phi, "W": topo.jac,
+                     "pose": topo.pose_fn, "result": topo.result_sx}[name]
+            ev = d[name] = cc.FastFn(f, fixed=(self.p,))
+        return ev
+
+    # -------------------------------------------------------------- conversions
+    def to_q(self, qa: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """All joint values (``mech.joint_names`` order) from q_a and the unknowns x."""
+        return np.array(self.topology.q_fn(qa, x, self.p)).ravel()
+
+    def qa_of(self, q: np.ndarray) -> np.ndarray:
+        return np.asarray(q, dtype=float)[np.array(self.mech.actuated)]
+
+    def x_from_q(self, q: np.ndarray, pose: np.ndarray | None = None) -> np.ndarray:
+        """The unknowns x of a full joint vector (platforms: the given ``pose``, else the
+        pose that best fits the legs' chains; then the legs' solved variables)."""
+        q = np.asarray(q, dtype=float)
+        st = self.topology.st
+        if st.platform is None:
+            return q[~np.array(self.mech.actuated)].copy()
+        if pose is not None:
+            x = self.x_from_pose(pose)
+            self._solved_from_q(q, x)
+            return x
+        frames = self.cached("leg_frames", lambda: ca.Function(
+            "leg_frames", [st.z[: len(self.mech.joint_names)], st.p],
+            [ca.horzcat(*[T.reshape((16, 1)) for T in st.leg_frames])]))
+        F = np.array(frames(q, self.p)).reshape((16, -1), order="F")
+        plat = self.platform
+        pts, ref, rots = [], [], []
+        for k, leg in enumerate(self.mech.legs):
+            T = F[:, k].reshape((4, 4), order="F")
+            if leg.end == "frame" or leg.reported:
+                rots.append(T[:3, :3] if leg.end == "frame" else T[:3, :3])
+            if leg.end == "point":
+                pts.append(T[:3, 3])
+                ref.append(np.asarray(leg.platform_point, dtype=float))
+            else:
+                pts.append(T[:3, 3])
+                ref.append(np.zeros(3))
+        R, pvec = _fit_pose(np.array(pts), np.array(ref), rots, plat)
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, pvec
+        x = np.zeros(self.nx)
+        x[: st.n_platform] = plat.x_from_pose(T)
+        self._solved_from_q(q, x)
+        return x
+
+    def _solved_from_q(self, q: np.ndarray, x: np.ndarray) -> None:
+        """Copy the legs' solved variables (chain form) from q into x."""
+        st = self.topology.st
+        for sl, leg in zip(st.legs, self.mech.legs):
+            if sl.reduced:
+                continue
+            n = len(leg.names)
+            free = [v for v in range(n) if v not in leg.actuated
+                    and sl.q.start + v not in sl.reported]
+            for v, xi in zip(free, sl.x):
+                x[xi] = q[sl.q.start + v]
+
+    def x_from_pose(self, T: np.ndarray) -> np.ndarray:
+        """The unknowns x of a platform pose (the legs' solved variables at their home
+        values); a Khalil mechanism's direct model cannot start from a pose."""
+        plat = self.platform
+        if plat is None:
+            raise MechanismError(
+                "guess: a pose cannot seed a Khalil mechanism's direct model; give joint values")
+        x = np.zeros(self.nx)
+        x[: self.n_platform] = plat.x_from_pose(np.asarray(T, dtype=float))
+        return x
+
+    def x_from_task(self, t: np.ndarray) -> np.ndarray:
+        plat = self.platform
+        if plat is None:
+            raise MechanismError("guess: task coordinates cannot seed a Khalil mechanism's "
+                                 "direct model; give joint values")
+        return self.x_from_pose(plat.task_to_pose(np.asarray(t, dtype=float)))
+
+    def canonical_x(self, x: np.ndarray) -> np.ndarray:
+        """Angles wrapped to (-pi, pi], quaternions normalised with w >= 0."""
+        x = np.array(x, dtype=float)
+        for i in np.flatnonzero(self.x_angle):
+            if math.isfinite(x[i]):
+                a = math.remainder(x[i], 2 * math.pi)
+                x[i] = math.pi if a <= -math.pi else a
+        plat = self.platform
+        if plat is not None and plat.norm_row:
+            x[: self.n_platform] = plat.canonical(x[: self.n_platform])
+        return x
+
+    def default_x(self, qa: np.ndarray) -> np.ndarray:
+        """A default starting point: the mechanism's home, else a central configuration."""
+        mech = self.mech
+        plat = self.platform
+        if plat is None:
+            if mech.home is not None:
+                return np.asarray(mech.home, dtype=float)[self.passive_index].copy()
+            return np.full(self.nx, 0.1)
+        if mech.home is not None:
+            return self.x_from_task(mech.home)
+        legs = mech.legs
+        base = np.mean([_pad3(leg.base) if leg.base.size else leg.home[:3, 3]
+                        for leg in legs], axis=0)
+        pts = np.mean([_pad3(leg.platform) if leg.platform.size else leg.platform_point
+                       for leg in legs], axis=0)
+        p = base - pts
+        if plat.name == "planar_point":
+            p = p + np.array([0.0, 0.5 * self.length, 0.0])
+        elif plat.space_dim == 3:
+            lens = [sum(leg.lengths) for leg in legs if leg.lengths]
+            if lens and all(leg.distance is not None and leg.distance.length is not None
+                            for leg in legs):
+                reach = -0.7 * float(np.mean(lens))
+            else:
+                reach = float(np.mean(qa)) if np.size(qa) else 0.0
+            p = p + np.array([0.0, 0.0, reach])
+        T = np.eye(4)
+        T[:3, 3] = p
+        return self.x_from_pose(T)
+
+    # -------------------------------------------------------------- compiled code
+    @property
+    def compiled(self) -> bool:
+        """True when the compiled C Functions are in use."""
+        return self.topology.compiled
+
+    @property
+    def compiled_fns(self) -> dict[str, ca.Function]:
+        return self.topology.compiled_fns
+
+    @property
+    def step(self) -> ca.Function:
+        """The Newton step (q_a, x, p) -> (x_next, res), compiled when available."""
+        return self.topology.compiled_fns.get("newton_step", self.topology.step_sx)
+
+    @property
+    def step_sx(self) -> ca.Function:
+        return self.topology.step_sx
+
+    def result_fn(self) -> ca.Function:
+        """(q_a, x, p) -> (Phi, W_p, T, q) in one evaluation (compiled when available)."""
+        return self.topology.compiled_fns.get("result", self.topology.result_sx)
+
+    def compile(self, build: bool = True, tracker: tuple[int, int] | None = None,
+                guard: int | None = None) -> bool:
+        """Use compiled C versions of the topology's Functions (and prepare the tracker
+        of ``forward_batch`` over ``tracker`` = (chunk, iters) points and its guard over
+        ``guard`` rows, compiled in parallel). Returns whether compiled code is in use."""
+        topo = self.topology
+        extra: list[tuple[str, list[ca.Function]]] = []
+        tr_key = g_key = None
+        if tracker is not None:
+            tr_key = ("tracker", int(tracker[0]), int(tracker[1]))
+            if tr_key not in topo._store:
+                f_tr = fused.tracker_chunk(topo, int(tracker[0]), int(tracker[1]))
+                extra.append((f"track:{topo.key}:{int(tracker[0])}:{int(tracker[1])}", [f_tr]))
+        if guard is not None:
+            g_key = ("guard", int(guard))
+            if g_key not in topo._store:
+                f_g, tag = fused.guard_chunk(topo, int(guard))
+                extra.append((tag, [f_g]))
+        libs = topo.compile(build=build, extra=extra)
+        for (tag, fs), lib in zip(extra, libs):
+            f = fs[0]
+            key = tr_key if tag.startswith("track:") else g_key
+            topo._store[key] = lib[f.name()] if lib is not None else f
+        return topo.compiled
+
+    def note_use(self) -> None:
+        """Count a solve; compile (``OPTKIN_COMPILE=auto``) once the model is in heavy use."""
+        self._uses[0] += 1
+        if self._uses[0] == HOT_USES and not self.compiled and cc.compile_mode() != "off":
+            self.compile()
+
+    def tracker(self, chunk: int, iters: int = 2) -> tuple[ca.Function, bool]:
+        """The path tracker of ``forward_batch`` over ``chunk`` points (inputs x0, q_a0,
+        QA, p) and whether it is compiled."""
+        topo = self.topology
+        key = ("tracker", int(chunk), int(iters))
+
+        def build() -> ca.Function:
+            f = fused.tracker_chunk(topo, int(chunk), int(iters))
+            lib = cc.library(f"track:{topo.key}:{int(chunk)}:{int(iters)}", [f])
+            return lib[f.name()] if lib is not None else f
+
+        f = topo.cached(key, build)
+        return f, f.is_a("External")
+
+    def guard(self, chunk: int) -> tuple[ca.Function, bool]:
+        """The row checks of ``forward_batch`` mapped over ``chunk`` rows (geometry as the
+        last, unmapped input) and whether they are compiled."""
+        topo = self.topology
+
+        def build() -> ca.Function:
+            f, tag = fused.guard_chunk(topo, int(chunk))
+            lib = cc.library(tag, [f])
+            return lib[f.name()] if lib is not None else f
+
+        f = topo.cached(("guard", int(chunk)), build)
+        return f, f.is_a("External")
+
+    def batch_step(self, n: int) -> ca.Function:
+        """The Newton step mapped over n columns (threads; the geometry unmapped)."""
+        topo = self.topology
+        return topo.cached(("batch", int(n), topo.compiled), lambda: self.step.map(
+            f"newton_step_{int(n)}", "thread", int(n), [2], []))
+
+    def compiled_batch_step(self, n: int) -> ca.Function:
+        """The compiled Newton step mapped over n columns; compiles if needed (falls back
+        to the interpreted step without a compiler)."""
+        self.compile()
+        return self.batch_step(n)
+
+    def inverse_parts(self) -> list:
+        """The parts of the inverse geometric model (:mod:`optkin.model.inverse`), built
+        once per topology (their Newton steps compiled when a compiler is present)."""
+        topo = self.topology
+
+        def build() -> list:
+            from . import inverse as inv
+
+            parts = inv.inverse_parts(topo, self.mech)
+            steps = [st_.step for part in parts if isinstance(part, inv.SearchPart)
+                     for st_ in part.stages]
+            lib = cc.library("inv:" + topo.key, steps) if steps else None
+            if lib is None:
+                return parts
+            out = []
+            for part in parts:
+                if isinstance(part, inv.SearchPart):
+                    stages = tuple(inv.Stage(lib[s_.step.name()], s_.idx) for s_ in part.stages)
+                    part = inv.SearchPart(part.vars, part.angle, part.length, stages,
+                                          part.pose_kind, part.check, part.leg, part.extra)
+                out.append(part)
+            return out
+
+        return topo.cached("inverse_parts", build)
+
+    @property
+    def fully_parallel(self) -> bool:
+        """Every leg a distance leg with one actuator and one row (Chablat and Wenger's
+        fully parallel mechanisms): W_a is diagonal and its signs are the working mode."""
+        st = self.topology.st
+        return bool(st.legs) and all(sl.reduced and len(sl.qa) == 1 for sl in st.legs) \
+            and self.m == self.na + (1 if self.platform.norm_row else 0)
+
+    def working_mode(self, qa: np.ndarray, x: np.ndarray) -> tuple[int, ...] | None:
+        """The signs of the diagonal of B = W_a (fully parallel mechanisms), else None."""
+        if not self.fully_parallel:
+            return None
+        ev = self.fast("W")
+        ev(qa, x)
+        Wa = ev.dense(2)
+        return tuple(int(np.sign(Wa[i, i])) for i in range(self.na))
+
+    def nlp(self) -> Any:
+        """The IPOPT solver of the direct model: min |(x - x_guess)/scale|^2 s.t. Phi = 0
+        (redundantly actuated: min |Phi|^2), parameters (q_a, x_guess, geometry)."""
+        return self.topology.cached("nlp", lambda: _build_nlp(self.topology))
+
+    @property
+    def nlp_build_time(self) -> float:
+        return float(self.topology.cached("nlp_build_time", lambda: 0.0))
+
+
+def _build_nlp(topo: Topology) -> Any:
+    st = topo.st
+    x = st.x
+    na, nx = topo.na, topo.nx
+    npar = st.p.shape[0]
+    P = ca.SX.sym("p", na + nx + npar)
+    qa, xg, pg = P[:na], P[na: na + nx], P[na + nx:]
+    phi = ca.substitute(topo.phi_sym, ca.vertcat(st.qa, st.p), ca.vertcat(qa, pg))
+    scale = ca.substitute(topo.x_scale_sym, st.p, pg)
+    f = ca.sumsqr((x - xg) / scale)
+    g = phi
+    if topo.m > nx:
+        # redundant actuation: more closure rows than unknowns; IPOPT refuses an
+        # overdetermined equality system, so minimise |Phi|^2 (a tiny pull towards the
+        # guess keeps the Hessian regular) and let the Newton polish decide success
+        f = ca.sumsqr(phi) + 1e-10 * f
+        g = ca.SX(0, 1)
+    opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
+            "ipopt.tol": 1e-12, "ipopt.constr_viol_tol": 1e-12, "ipopt.max_iter": 300,
+            "error_on_fail": False}
+    t0 = time.perf_counter()
+    solver = ca.nlpsol("forward", "ipopt", {"x": x, "p": P, "f": f, "g": g}, opts)
+    topo._store["nlp_build_time"] = time.perf_counter() - t0
+    return solver
+
+
+def _pad3(v: np.ndarray) -> np.ndarray:
+    v = np.asarray(v, dtype=float).ravel()
+    return np.concatenate([v, np.zeros(3 - v.size)]) if v.size < 3 else v
+
+
+def _fit_pose(E: np.ndarray, B: np.ndarray, rots: list[np.ndarray], plat) -> tuple:
+    """The platform pose (R, p) with R b_i + p closest to e_i (Kabsch) and R closest to
+    the chains' end orientations ``rots`` when the platform turns."""
+    if not plat.rotates:
+        return np.eye(3), np.mean(E - B, axis=0)
+    if rots:  # chains reaching the platform frame give the orientation
+        M = np.sum(rots, axis=0)
+        U, _, Vt = np.linalg.svd(M)
+        R = U @ np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+        return R, np.mean(E - B @ R.T, axis=0)
+    if plat.space_dim == 2:
+        e, b = E[:, :2] - E[:, :2].mean(0), B[:, :2] - B[:, :2].mean(0)
+        H = b.T @ e
+        phi = math.atan2(H[0, 1] - H[1, 0], H[0, 0] + H[1, 1])
+        R = np.array([[math.cos(phi), -math.sin(phi), 0], [math.sin(phi), math.cos(phi), 0],
+                      [0, 0, 1.0]])
+    else:
+        e, b = E - E.mean(0), B - B.mean(0)
+        U, _, Vt = np.linalg.svd(b.T @ e)
+        D = np.diag([1, 1, np.sign(np.linalg.det(Vt.T @ U.T))])
+        R = Vt.T @ D @ U.T
+    return R, np.mean(E - B @ R.T, axis=0)

@@ -111,16 +111,12 @@ def check_qa(model: Model, qa: Any) -> np.ndarray:
             f"qa: expected {na} values for the active joints {list(mech.active_names)}, "
             f"got shape {shape}", path=("qa",))
     a = as_vector(qa, "qa", na, names=mech.active_names, path=("qa",))
-    if mech.kind == "legs":
-        rho = getattr(model, "_rho_index", None)
-        if rho is None:
-            rho = model._rho_index = np.array(
-                [i for i, n in enumerate(mech.active_names) if n.endswith(".rho")], dtype=int)
-        if rho.size and np.min(a[rho]) <= 0:
-            i = int(rho[np.argmin(a[rho])])
-            raise MechanismError(
-                f"qa[{i}] ({mech.active_names[i]}): a leg length must be positive, got {a[i]:g}",
-                path=("qa", i))
+    pos = model.qa_positive
+    if pos.any() and np.min(a[pos]) <= 0:
+        i = int(np.flatnonzero(pos)[np.argmin(a[pos])])
+        raise MechanismError(
+            f"qa[{i}] ({mech.active_names[i]}): a leg length must be positive, got {a[i]:g}",
+            path=("qa", i))
     return a
 
 
@@ -164,10 +160,8 @@ def parse_guess(model: Model, qa: np.ndarray, guess: Any) -> np.ndarray:
         q[act] = qa
         q[~act] = g
         return model.x_from_q(q)
-    if g.ndim == 1 and g.size == mech.task_dim and mech.kind == "legs":
-        from ..mechanism.tasks import task_to_pose
-
-        return model.x_from_pose(task_to_pose(mech, g))
+    if g.ndim == 1 and g.size == mech.task_dim and model.platform is not None:
+        return model.x_from_task(g)
     raise MechanismError(
         f"guess: expected the unknowns x ({model.nx}: {list(model.x_names)}), all joints ({nq}), "
         f"the passive joints ({npas}), a 4x4 pose or a KinResult; got shape {g.shape}",
@@ -208,17 +202,6 @@ def newton(model: Model, qa: np.ndarray, x: np.ndarray, tol: float, max_iter: in
     if r < best_r:
         best_x, best_r = x, r
     return best_x, best_r, max_iter, best_r <= tol
-
-
-def _masks(model: Model) -> tuple[np.ndarray, np.ndarray]:
-    m = getattr(model, "_result_masks", None)
-    if m is None:
-        mech = model.mech
-        act = np.array(mech.actuated, dtype=bool)
-        cut = set(mech.cut_names)
-        is_cut = np.array([n in cut for n in mech.joint_names], dtype=bool)
-        m = model._result_masks = (np.flatnonzero(~act & ~is_cut), np.flatnonzero(is_cut))
-    return m
 
 
 def make_result(
@@ -269,7 +252,7 @@ def make_result(
         message += "; outside the joint limits: " + ", ".join(
             n for n, v in zip(mech.joint_names, q)
             if n in mech.limits and not mech.limits[n][0] <= v <= mech.limits[n][1])
-    ip, ic = _masks(model)
+    ip, ic = model.qp_index, model.qc_index
     stats.nit = nit
     return KinResult(
         q=q,

@@ -89,14 +89,14 @@ def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinR
             return make_result(model, qa, x, tol, nit, stats, status, msg)
     solver = model.nlp()
     t1 = timer()
-    sol = solver(x0=x0, p=np.concatenate([qa, x0]), lbg=0, ubg=0)
+    sol = solver(x0=x0, p=np.concatenate([qa, x0, model.p]), lbg=0, ubg=0)
     st = solver.stats()
     raw = str(st.get("return_status", ""))
     x = np.array(sol["x"]).ravel()
     nit = int(st.get("iter_count", 0))
     x, r, npol, ok = newton(model, qa, x, tol, polish)
     stats = SolverStats(
-        "ipopt", getattr(model, "nlp_build_time", 0.0), timer() - t1, nit + npol, raw,
+        "ipopt", model.nlp_build_time, timer() - t1, nit + npol, raw,
         {"ipopt_iter": nit, "polish_iter": npol, "t_wall_total": st.get("t_wall_total")},
     )
     status = None if ok else ipopt_status(raw)

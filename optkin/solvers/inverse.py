@@ -1,10 +1,11 @@
 """The inverse geometric model: every posture for a given end-effector pose.
 
-Leg-described platforms are solved leg by leg in closed form (seed 003): each leg has one
-or two postures, and the set holds every combination, labelled with its working mode (the
-sign of each diagonal entry of B, seed 004). Khalil mechanisms solve the direct path and the
-loops together: the square system [Phi(q); task error(q)] = 0 over all joints is solved by
-batched Newton from low-discrepancy starts, and distinct solutions are kept (seed 000, 7.6).
+The model splits the joint values into parts solved on their own (:mod:`optkin.model.
+inverse`): a distance leg in closed form (seed 003: one or two postures per leg), a leg in
+chain form or a Khalil table (seed 000, 7.6) by batched Newton from low-discrepancy starts,
+keeping distinct solutions. The postures are every combination of the parts' solutions,
+labelled with their working mode (the sign of each diagonal entry of B, seed 004) where
+the mechanism is fully parallel.
 """
 
 from __future__ import annotations
@@ -12,7 +13,6 @@ from __future__ import annotations
 import itertools
 from typing import Any
 
-import casadi as ca
 import numpy as np
 from scipy.stats import qmc
 
@@ -21,11 +21,9 @@ from ..errors import MechanismError
 from ..limits import Deadline
 from ..mechanism import Mechanism
 from ..mechanism.geometry import wrap_angle
-from ..mechanism.legs import leg_inverse
 from ..mechanism.tasks import as_pose
-from ..model import Model, compiled, get_model
-from ..model import khalil as kh
-from ..model.core import damped_step
+from ..model import Model, get_model
+from ..model.inverse import ClosedPart, SearchPart
 from ..results import KinResult, SolutionSet, SolverStats
 from .common import count_option, make_result, merge_options, newton, timer
 
@@ -34,8 +32,8 @@ __all__ = ["inverse", "INVERSE_DEFAULTS", "distinct"]
 #: Options of :func:`inverse` and their defaults.
 INVERSE_DEFAULTS: dict[str, Any] = {
     "tol": 1e-10,  # max |Phi| (and task error) for a solution
-    "starts": 256,  # Khalil mechanisms: number of Newton starts
-    "iters": 60,  # Khalil mechanisms: Newton iterations per start
+    "starts": 256,  # searched parts: number of Newton starts
+    "iters": 60,  # searched parts: Newton iterations per start
     "seed": 0,
 }
 
@@ -59,7 +57,7 @@ def inverse(mech: Mechanism, pose: Any, **options: Any) -> SolutionSet:
     SolutionSet
         One :class:`KinResult` per posture (empty, with ``info["message"]``, when the pose is
         out of reach). For platforms each result carries ``posture`` (the branch of each
-        leg) and ``working_mode`` (the sign of each B_jj).
+        leg) and ``working_mode`` (the sign of each B_jj) where that applies.
 
     Examples
     --------
@@ -78,119 +76,171 @@ def inverse(mech: Mechanism, pose: Any, **options: Any) -> SolutionSet:
     model = get_model(mech)
     T = as_pose(mech, pose)
     checkpoint()  # validation stops here: every argument is checked
-    if mech.kind == "legs":
-        return _inverse_legs(model, T, float(opts["tol"]))
-    return _inverse_khalil(model, T, opts)
+    return _inverse(model, T, opts)
 
 
-def _inverse_legs(model: Model, T: np.ndarray, tol: float) -> SolutionSet:
+def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
     mech = model.mech
+    tol = float(opts["tol"])
+    n, iters, seed = int(opts["starts"]), int(opts["iters"]), int(opts["seed"])
     t0 = timer()
-    R, p = T[:3, :3], T[:3, 3]
-    if mech.planar:
-        R, p = R[:2, :2], p[:2]
-    per_leg = []
-    for i, leg in enumerate(mech.legs):
-        sols = leg_inverse(leg, R, p)
-        if not sols:
-            return SolutionSet(
-                [], "postures",
-                {"success": False, "message": f"leg {i + 1} ({leg.type}) cannot reach this pose"},
-            )
-        per_leg.append(sols)
-    x = model.x_from_pose(T)
-    out: list[KinResult] = []
-    act = np.array(mech.actuated)
-    for combo in itertools.product(*[range(len(s)) for s in per_leg]):
-        q = np.concatenate([per_leg[i][c][0] for i, c in enumerate(combo)])
-        qa = q[act]
-        if np.any(qa[[n.endswith(".rho") for n in mech.active_names]] <= 0):
-            continue
-        ev = model.fast("W")  # buffered (compiled when available) evaluation
-        ev(qa, x)
-        wm = tuple(int(np.sign(v)) for v in np.diag(ev.dense(2)))
-        stats = SolverStats("closed-form", 0.0, timer() - t0, 0, "legs")
-        r = make_result(model, qa, x, tol, 0, stats, posture=tuple(combo), working_mode=wm)
-        r.q = q  # the closed-form joint values of this posture
-        out.append(r)
-    return SolutionSet(out, "postures", {"success": bool(out), "message": f"{len(out)} postures"})
-
-
-def _newton_function(name, G, z, params, scale):
-    """A damped Newton step on G(z; params) = 0 and the residual max |G| (CasADi Function)."""
-    J = ca.jacobian(G, z)
-    dz = -ca.solve(J, G)
-    fG = ca.Function(name + "_G", [z, *params], [G])
-    zn = damped_step(fG, z, dz, scale, params)
-    step = ca.Function(name, [z, *params], [zn, ca.mmax(ca.fabs(G))])
-    return step, fG
-
-
-def _inverse_system(model: Model) -> dict[str, Any]:
-    """The Functions of the Khalil inverse model (cached on the model).
-
-    Following seed 000, 7.6: first the joints of the direct path base -> end effector are
-    solved from the task equations, then the remaining joints from the loop closure. When
-    the joint counts do not split that way, the whole system [Phi(q); task(q)] = 0 over all
-    joints is used instead.
-    """
-    if model._inv is not None:
-        return model._inv
-    mech = model.mech
+    deadline = Deadline()  # the time budget of one call (optkin.limits)
     nq = len(mech.joint_names)
-    q = ca.SX.sym("q", nq)
-    Td = ca.SX.sym("Td", 4, 4)
-    T = kh.frames_0(mech, q)
-    rows, names = kh.closure_rows(mech, T)
-    phi = rows[[names.index(n) for n in model.row_names]]
-    Te = T[mech.end_effector]
-    comps = {"x": Te[0, 3] - Td[0, 3], "y": Te[1, 3] - Td[1, 3], "z": Te[2, 3] - Td[2, 3]}
-    g = kh.gibbs(ca.mtimes(Te[:3, :3], Td[:3, :3].T))
-    comps.update({"rx": g[0], "ry": g[1], "rz": g[2]})
-    task = ca.vertcat(*[comps[c] for c in mech.task])
-    if phi.shape[0] + task.shape[0] != nq:
-        raise MechanismError(
-            f"task: the inverse model needs as many equations as joints: {phi.shape[0]} closure "
-            f"rows + {len(mech.task)} task components != {nq} joints; choose task components "
-            "matching the degrees of freedom"
-        )
-    revolute = np.array(mech.revolute, dtype=bool)
-    scale = np.where(revolute, 1.0, model.length)
-    index = {n: i for i, n in enumerate(mech.joint_names)}
-    path = [index[f.name] for f in (mech.table.frames[j - 1] for j in mech.table.chain(
-        mech.end_effector)) if f.is_joint]
-    off = [i for i in range(nq) if i not in path]
-    out: dict[str, Any] = {"revolute": revolute, "scale": scale, "path": path, "off": off,
-                           "task": ca.Function("task", [q, Td], [task])}
-    if len(path) == task.shape[0] and len(off) == phi.shape[0]:
-        zp, zo = ca.SX.sym("zp", len(path)), ca.SX.sym("zo", len(off))
-        qq = ca.SX.zeros(nq)
-        qq[path] = zp
-        qq[off] = zo
-        t1 = ca.substitute(task, q, qq)
-        # the task equations depend on the path joints only ([7.11])
-        t1 = ca.substitute(t1, zo, ca.DM.zeros(len(off)))
-        out["stage1"] = _newton_function("inv_path", t1, zp, [Td], scale[path])[0]
-        p2 = ca.substitute(phi, q, qq)
-        out["stage2"] = _newton_function("inv_loops", p2, zo, [zp], scale[off])[0]
-    else:
-        G = ca.vertcat(phi, task)
-        out["joint"] = _newton_function("inv_all", G, q, [Td], scale)[0]
-    # compiled C versions of the batched Newton steps when a compiler is present (the
-    # interpreted steps took ~90 % of the time of a Khalil inverse; optkin.model.compiled)
-    keys = [k for k in ("stage1", "stage2", "joint") if k in out]
-    lib = compiled.library("inv:" + mech.key, [out[k] for k in keys])
-    if lib is not None:
-        for k in keys:
-            out[k] = lib[out[k].name()]
-    model._inv = out
+    plat = model.platform
+    xplat = plat.x_from_pose(T) if plat is not None else None
+    parts = model.inverse_parts()
+    per_part: list[list[np.ndarray]] = []  # for each part, its solutions as full-q patches
+    runs = converged = 0
+    searched = False
+    for part in parts:
+        if isinstance(part, ClosedPart):
+            QA, Q, V = (np.array(v) for v in part.fn(xplat, model.p))
+            sols = []
+            for b in range(part.branches):
+                if V[b, 0] < 0.5 or not np.all(np.isfinite(Q[b])):
+                    continue
+                if any(np.allclose(Q[b], s_, rtol=0, atol=1e-12) for s_ in sols):
+                    continue  # the two branches coincide (the leg is stretched)
+                sols.append(Q[b].copy())
+            if not sols:
+                leg = mech.legs[part.leg]
+                return SolutionSet([], "postures", {
+                    "success": False,
+                    "message": f"leg {part.leg + 1} ({leg.type}) cannot reach this pose"})
+            per_part.append([_patch(nq, part.q, q_) for q_ in sols])
+        else:
+            searched = True
+            sols, r_, c_ = _search(model, part, T, xplat, n, iters, seed, tol, deadline)
+            runs += r_
+            converged += c_
+            if not sols and part.leg >= 0:
+                leg = mech.legs[part.leg]
+                return SolutionSet([], "postures", {
+                    "success": False, "starts": runs,
+                    "message": f"leg {part.leg + 1} ({leg.type}) cannot reach this pose "
+                               f"({n} starts)"})
+            per_part.append(sols)
+    act = np.array(mech.actuated)
+    out: list[KinResult] = []
+    outside = 0
+    checks = [p_ for p_ in parts if isinstance(p_, SearchPart) and p_.check is not None]
+    for combo in itertools.product(*[range(len(s_)) for s_ in per_part]):
+        q = np.zeros(nq)
+        for i, c in enumerate(combo):
+            patch = per_part[i][c]
+            mask = ~np.isnan(patch)
+            q[mask] = patch[mask]
+        qa = q[act]
+        if np.any(qa[model.qa_positive] <= 0):
+            continue
+        x = model.x_from_q(q, pose=T)
+        if searched:  # polish the closure with the active joints fixed
+            x, _, nit, _ = newton(model, qa, x, tol, 5)
+        else:
+            nit = 0
+        stats = SolverStats("closed-form" if not searched else "newton-multistart", 0.0,
+                            timer() - t0, nit, "legs" if plat is not None else "khalil",
+                            {"starts": runs, "converged": converged} if searched else {})
+        posture = tuple(combo) if plat is not None else None
+        r = make_result(model, qa, x, tol, nit, stats, posture=posture,
+                        working_mode=model.working_mode(qa, x))
+        if not r.success:
+            continue
+        if any(float(np.max(np.abs(np.array(c_.check(r.q, T, model.p)).ravel()))) > 1e-8
+               for c_ in checks):
+            continue
+        if not mech.within_limits(r.q):
+            outside += 1
+            continue
+        if not searched:
+            r.q = q  # the closed-form joint values of this posture
+        out.append(r)
+    if searched:
+        out = [out[j] for j in distinct(np.array([r_.q for r_ in out]).T, np.array(
+            mech.revolute, dtype=bool), np.where(mech.revolute, 1.0, model.length), 1e-6)] \
+            if out else out
+    method = _method(parts)
+    msg = f"{len(out)} postures"
+    if searched:
+        msg += f" from {runs} starts ({converged} converged; {method})"
+    if outside:
+        msg += f"; {outside} outside the joint limits left out"
+    info: dict[str, Any] = {"success": bool(out), "message": msg}
+    if searched:
+        info.update(starts=runs, converged=converged, method=method, outside_limits=outside)
+    if deadline.expired():  # the enumeration was cut short: say so, never claim success
+        info.update(success=False, status="time_limit",
+                    message=deadline.message("inverse") + f"; {info['message']}")
+    return SolutionSet(out, "postures", info, seed=seed if searched else None)
+
+
+def _method(parts: list) -> str:
+    search = [p_ for p_ in parts if isinstance(p_, SearchPart)]
+    if not search:
+        return "closed form, leg by leg"
+    if search[0].pose_kind == "matrix":
+        return "direct path then loops (7.6)" if len(search[0].stages) == 2 else "all joints"
+    return "leg by leg (closed form and search)"
+
+
+def _patch(nq: int, sl: slice, values: np.ndarray) -> np.ndarray:
+    out = np.full(nq, np.nan)
+    out[sl] = values
     return out
 
 
-_MAPS: dict[tuple[str, int], tuple[ca.Function, ca.Function]] = {}
+def _search(model: Model, part: SearchPart, T: np.ndarray, xplat: np.ndarray | None, n: int,
+            iters: int, seed: int, tol: float, deadline: Deadline
+            ) -> tuple[list[np.ndarray], int, int]:
+    """The distinct solutions of a searched part (as full-q patches), starts, converged."""
+    nq = len(model.mech.joint_names)
+    vars_ = np.array(part.vars, dtype=int)
+    angle = np.asarray(part.angle, dtype=bool)
+    scale = np.where(angle, 1.0, model.length)
+    lo = np.where(angle, -np.pi, -2 * model.length)
+    hi = np.where(angle, np.pi, 2 * model.length)
+    pose = (np.asarray(T, dtype=float).ravel(order="F") if part.pose_kind == "matrix"
+            else np.asarray(xplat, dtype=float))
+    runs = 0
+    cands: list[np.ndarray] = []
+    first = part.stages[0]
+    idx1 = np.array(first.idx, dtype=int)
+    Z1, r1 = _multistart(model, first.step, pose, lo[idx1], hi[idx1], n, iters, seed, deadline)
+    runs += n
+    Z1 = Z1[:, np.flatnonzero(r1 <= 1e3 * tol)]
+    Z1[angle[idx1]] = wrap_angle(Z1[angle[idx1]])
+    if len(part.stages) == 1:
+        cands = [Z1[:, j] for j in range(Z1.shape[1])]
+        full_idx = idx1
+    else:
+        second = part.stages[1]
+        idx2 = np.array(second.idx, dtype=int)
+        for j in distinct(Z1, angle[idx1], scale[idx1]):
+            if deadline.expired():
+                break
+            z1 = Z1[:, j]
+            n2 = max(32, n // 4)
+            Z2, r2 = _multistart(model, second.step, z1, lo[idx2], hi[idx2], n2, iters,
+                                 seed + 1, deadline)
+            runs += n2
+            for i in np.flatnonzero(r2 <= 1e3 * tol):
+                cands.append(np.concatenate([z1, Z2[:, i]]))
+        full_idx = np.concatenate([idx1, idx2])
+    converged = len(cands)
+    if not cands:
+        return [], runs, 0
+    Z = np.array(cands).T
+    Z[angle[full_idx]] = wrap_angle(Z[angle[full_idx]])
+    keep = distinct(Z, angle[full_idx], scale[full_idx], 1e-6)
+    out = []
+    for j in keep:
+        patch = np.full(nq, np.nan)
+        patch[vars_[full_idx]] = Z[:, j]
+        out.append(patch)
+    return out, runs, converged
 
 
-def _multistart(step, params: np.ndarray, lo, hi, n: int, iters: int, seed: int,
+def _multistart(model: Model, step, param: np.ndarray, lo, hi, n: int, iters: int, seed: int,
                 deadline: Deadline | None = None):
     """Batched Newton from n Sobol starts in the box [lo, hi]; returns (Z, residuals).
 
@@ -199,21 +249,17 @@ def _multistart(step, params: np.ndarray, lo, hi, n: int, iters: int, seed: int,
     dim = len(lo)
     U = qmc.Sobol(dim, scramble=True, seed=seed).random(n)
     Z = (lo + U * (hi - lo)).T
-    key = (step.name(), n)
-    fmap = _MAPS.get(key)
-    if fmap is None or fmap[0] is not step:
-        fmap = (step, step.map(n, "thread", 2))
-        _MAPS[key] = fmap
-    fmap = fmap[1]
-    P = np.tile(params, (1, n))
+    fmap = model.cached(("inverse_map", step.name(), n, step.is_a("External")),
+                        lambda: step.map(f"{step.name()}_{n}", "thread", n, [1, 2], []))
+    param = np.asarray(param, dtype=float).reshape(-1, 1)
     for _ in range(iters):
         if deadline is not None and deadline.expired():
             break
-        Zn, _ = fmap(Z, P)
+        Zn, _ = fmap(Z, param, model.p)
         Zn = np.array(Zn)
         good = np.all(np.isfinite(Zn), axis=0)
         Z[:, good] = Zn[:, good]
-    _, r = fmap(Z, P)
+    _, r = fmap(Z, param, model.p)
     return Z, np.array(r).ravel()
 
 
@@ -231,76 +277,3 @@ def distinct(
                 continue
         keep.append(j)
     return keep
-
-
-def _inverse_khalil(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
-    mech = model.mech
-    sysf = _inverse_system(model)
-    revolute, scale = sysf["revolute"], sysf["scale"]
-    nq = len(mech.joint_names)
-    n, iters, seed = int(opts["starts"]), int(opts["iters"]), int(opts["seed"])
-    tol = float(opts["tol"])
-    t0 = timer()
-    deadline = Deadline()  # the time budget of one call (optkin.limits)
-    lo = np.where(revolute, -np.pi, -2 * model.length)
-    hi = np.where(revolute, np.pi, 2 * model.length)
-    candidates: list[np.ndarray] = []
-    runs = 0
-    if "stage1" in sysf:
-        path, off = sysf["path"], sysf["off"]
-        Zp, r1 = _multistart(sysf["stage1"], T, lo[path], hi[path], n, iters, seed, deadline)
-        runs += n
-        ok1 = np.flatnonzero(r1 <= 1e3 * tol)
-        Zp = Zp[:, ok1]
-        Zp[revolute[path]] = wrap_angle(Zp[revolute[path]])
-        for j in distinct(Zp, revolute[path], scale[path]):
-            if deadline.expired():
-                break
-            zp = Zp[:, j]
-            n2 = max(32, n // 4)
-            Zo, r2 = _multistart(sysf["stage2"], zp[:, None], lo[off], hi[off], n2, iters,
-                                 seed + 1, deadline)
-            runs += n2
-            for i in np.flatnonzero(r2 <= 1e3 * tol):
-                qv = np.empty(nq)
-                qv[path] = zp
-                qv[off] = Zo[:, i]
-                candidates.append(qv)
-    else:
-        Q, r = _multistart(sysf["joint"], T, lo, hi, n, iters, seed, deadline)
-        runs += n
-        candidates = [Q[:, i] for i in np.flatnonzero(r <= 1e3 * tol)]
-    converged = len(candidates)
-    if candidates:
-        Q = np.array(candidates).T
-        Q[revolute] = wrap_angle(Q[revolute])
-        idx = distinct(Q, revolute, scale, 1e-6)
-    else:
-        Q, idx = np.zeros((nq, 0)), []
-    act = np.array(mech.actuated)
-    out: list[KinResult] = []
-    outside = 0
-    for j in idx:
-        q = Q[:, j]
-        qa = q[act]
-        # final polish of the closure with the active joints fixed
-        x, _, nit, _ = newton(model, qa, q[~act], tol, 5)
-        stats = SolverStats("newton-multistart", 0.0, timer() - t0, iters, "khalil",
-                            {"starts": runs, "converged": converged})
-        kr = make_result(model, qa, x, tol, nit, stats)
-        task_err = float(np.max(np.abs(np.array(sysf["task"](kr.q, T)).ravel())))
-        if not kr.success or task_err > 1e-8:
-            continue
-        if not mech.within_limits(kr.q):
-            outside += 1
-            continue
-        out.append(kr)
-    method = "direct path then loops (7.6)" if "stage1" in sysf else "all joints"
-    info = {"success": bool(out), "starts": runs, "converged": converged, "method": method,
-            "outside_limits": outside,
-            "message": f"{len(out)} postures from {runs} starts ({converged} converged; {method})"
-            + (f"; {outside} outside the joint limits left out" if outside else "")}
-    if deadline.expired():  # the enumeration was cut short: say so, never claim success
-        info.update(success=False, status="time_limit",
-                    message=deadline.message("inverse") + f"; {info['message']}")
-    return SolutionSet(out, "postures", info, seed=seed)
