@@ -23,6 +23,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
+from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
@@ -36,7 +37,7 @@ from . import compiled as cc
 from . import fused
 from .structure import Structure, build_structure
 
-__all__ = ["Model", "Topology", "get_model", "clear_cache"]
+__all__ = ["Model", "Topology", "DistanceForm", "get_model", "clear_cache"]
 
 #: forward() calls on one model after which it is compiled (OPTKIN_COMPILE=auto)
 HOT_USES = 100
@@ -427,7 +428,8 @@ class Model:
         if st.platform is None:
             return q[~np.array(self.mech.actuated)].copy()
         if pose is not None:
-            x = self.x_from_pose(pose)
+            x = np.zeros(self.nx)
+            x[: self.n_platform] = self.platform.x_from_pose(np.asarray(pose, dtype=float))
             self._solved_from_q(q, x)
             return x
         frames = self.cached("leg_frames", lambda: ca.Function(
@@ -454,11 +456,11 @@ class Model:
         self._solved_from_q(q, x)
         return x
 
-    def _solved_from_q(self, q: np.ndarray, x: np.ndarray) -> None:
-        """Copy the legs' solved variables (chain form) from q into x."""
+    def _solved_from_q(self, q: np.ndarray, x: np.ndarray, only: int | None = None) -> None:
+        """Copy the legs' solved variables (chain form) from q into x (leg ``only``)."""
         st = self.topology.st
-        for sl, leg in zip(st.legs, self.mech.legs):
-            if sl.reduced:
+        for k, (sl, leg) in enumerate(zip(st.legs, self.mech.legs)):
+            if sl.reduced or (only is not None and k != only):
                 continue
             n = len(leg.names)
             free = [v for v in range(n) if v not in leg.actuated
@@ -466,23 +468,70 @@ class Model:
             for v, xi in zip(free, sl.x):
                 x[xi] = q[sl.q.start + v]
 
-    def x_from_pose(self, T: np.ndarray) -> np.ndarray:
-        """The unknowns x of a platform pose (the legs' solved variables at their home
-        values); a Khalil mechanism's direct model cannot start from a pose."""
+    def x_from_pose(self, T: np.ndarray, qa: np.ndarray | None = None) -> np.ndarray:
+        """The unknowns x of a platform pose; the variables of legs in chain form solved
+        for that pose (with the actuated values ``qa`` when given), nearest their home
+        values. A Khalil mechanism's direct model cannot start from a pose."""
         plat = self.platform
         if plat is None:
             raise MechanismError(
                 "guess: a pose cannot seed a Khalil mechanism's direct model; give joint values")
         x = np.zeros(self.nx)
         x[: self.n_platform] = plat.x_from_pose(np.asarray(T, dtype=float))
+        self._chain_legs_at(x, qa)
         return x
 
-    def x_from_task(self, t: np.ndarray) -> np.ndarray:
+    def _chain_legs_at(self, x: np.ndarray, qa: np.ndarray | None) -> None:
+        """Fill the variables of legs in chain form for the platform coordinates in x: a
+        Gauss-Newton search over them (the platform fixed) from their home values and a
+        few spread starts, keeping the solution nearest home. Without ``qa`` the actuated
+        variables are searched too (each leg's inverse)."""
+        from .inverse import SearchPart
+
+        st = self.topology.st
+        idx = [i for sl in st.legs if not sl.reduced for i in sl.x]
+        if not idx:
+            return
+        idx_a = np.array(idx, dtype=int)
+        ang = self.x_angle[idx_a]
+        starts = [np.zeros(idx_a.size)] + [np.where(ang, a, 0.0)
+                                            for a in (np.pi / 2, -np.pi / 2, np.pi)]
+        tol = 1e-9 * max(1.0, self.length)
+        if qa is None:  # each leg on its own, its actuated variables free
+            nq = len(self.mech.joint_names)
+            for part in self.inverse_parts():
+                if not isinstance(part, SearchPart) or part.leg < 0:
+                    continue
+                step = part.stages[0].step
+                n = len(part.vars)
+                best = _nearest_root(
+                    lambda z, step=step: step(z, x[: self.n_platform], self.p),
+                    [np.where(part.angle, a, 0.0) for a in (0.0, np.pi / 2, -np.pi / 2, np.pi)]
+                    if n else [], part.angle, self.length, tol)
+                if best is not None:
+                    q = np.zeros(nq)
+                    q[list(part.vars)] = best
+                    self._solved_from_q(q, x, only=part.leg)
+            return
+        f = self.cached("passive_step", lambda: _passive_step(self.topology))
+        qa = np.asarray(qa, dtype=float)
+
+        def step(z):
+            xx = x.copy()
+            xx[idx_a] = z
+            xn, r = f(qa, xx, self.p)
+            return np.array(xn).ravel()[idx_a], r
+
+        best = _nearest_root(step, starts, ang, self.length, tol)
+        if best is not None:
+            x[idx_a] = best
+
+    def x_from_task(self, t: np.ndarray, qa: np.ndarray | None = None) -> np.ndarray:
         plat = self.platform
         if plat is None:
             raise MechanismError("guess: task coordinates cannot seed a Khalil mechanism's "
                                  "direct model; give joint values")
-        return self.x_from_pose(plat.task_to_pose(np.asarray(t, dtype=float)))
+        return self.x_from_pose(plat.task_to_pose(np.asarray(t, dtype=float)), qa)
 
     def canonical_x(self, x: np.ndarray) -> np.ndarray:
         """Angles wrapped to (-pi, pi], quaternions normalised with w >= 0."""
@@ -505,7 +554,7 @@ class Model:
                 return np.asarray(mech.home, dtype=float)[self.passive_index].copy()
             return np.full(self.nx, 0.1)
         if mech.home is not None:
-            return self.x_from_task(mech.home)
+            return self.x_from_task(mech.home, qa)
         legs = mech.legs
         base = np.mean([_pad3(leg.base) if leg.base.size else leg.home[:3, 3]
                         for leg in legs], axis=0)
@@ -524,7 +573,7 @@ class Model:
             p = p + np.array([0.0, 0.0, reach])
         T = np.eye(4)
         T[:3, 3] = p
-        return self.x_from_pose(T)
+        return self.x_from_pose(T, qa)
 
     # -------------------------------------------------------------- compiled code
     @property
@@ -652,6 +701,43 @@ class Model:
         return bool(st.legs) and all(sl.reduced and len(sl.qa) == 1 for sl in st.legs) \
             and self.m == self.na + (1 if self.platform.norm_row else 0)
 
+    @property
+    def working_mode_signs(self) -> tuple[tuple[int, ...], ...] | None:
+        """For each actuator, the signs its diagonal entry of B can take (fully parallel
+        mechanisms): a leg whose actuated joint moves its centre has two postures (+1, -1);
+        one whose actuated joint is the distance has B_jj = -1 always. None otherwise."""
+        if not self.fully_parallel:
+            return None
+        return tuple((-1,) if leg.distance.length is None else (1, -1)
+                     for leg in self.mech.legs)
+
+    def working_modes(self) -> list[tuple[int, ...]]:
+        """Every sign pattern of diag(B) (Chablat and Wenger, Definition 4), in one order
+        (+1 before -1, the first leg slowest); empty when not fully parallel."""
+        import itertools
+
+        signs = self.working_mode_signs
+        return [] if signs is None else [tuple(m_) for m_ in itertools.product(*signs)]
+
+    def distance_form(self) -> DistanceForm | None:
+        """The legs as distance constraints |P_i - C_i(q_a)| = r_i(q_a) (every leg in the
+        reduced form), else None: centres and radii per actuated values, platform points."""
+        st = self.topology.st
+        if not st.legs or not all(sl.reduced for sl in st.legs):
+            return None
+        fn = self.cached("distance_form", lambda: ca.Function(
+            "distance_form", [st.qa, st.p],
+            [ca.horzcat(*[d[0] for d in st.distance]),
+             ca.horzcat(*[d[2] for d in st.distance])], ["qa", "p"], ["C", "r"]))
+        legs = self.mech.legs
+        return DistanceForm(
+            fn=fn, p=self.p,
+            platform_points=np.array([leg.platform_point for leg in legs], dtype=float),
+            length_actuated=np.array([leg.distance.length is None for leg in legs]),
+            driver_revolute=np.array([leg.distance.driver > 0 and leg.kinds[0] == "R"
+                                      for leg in legs]),
+            space_dim=self.platform.space_dim)
+
     def working_mode(self, qa: np.ndarray, x: np.ndarray) -> tuple[int, ...] | None:
         """The signs of the diagonal of B = W_a (fully parallel mechanisms), else None."""
         if not self.fully_parallel:
@@ -669,6 +755,41 @@ class Model:
     @property
     def nlp_build_time(self) -> float:
         return float(self.topology.cached("nlp_build_time", lambda: 0.0))
+
+
+@dataclass(frozen=True)
+class DistanceForm:
+    """Legs as distance constraints |P_i - C_i(q_a)| = r_i(q_a) (see
+    :meth:`Model.distance_form`).
+
+    Attributes
+    ----------
+    platform_points : ndarray (n, 3)
+        P_i in the platform frame.
+    length_actuated : ndarray (n,) of bool
+        The actuated joint is the distance (RPR, UPS): C_i fixed, r_i = q_a,i.
+    driver_revolute : ndarray (n,) of bool
+        The actuated joint turns C_i about an axis (RRR, RUS): C_i on a circle.
+    space_dim : int
+    """
+
+    fn: ca.Function
+    p: np.ndarray
+    platform_points: np.ndarray
+    length_actuated: np.ndarray
+    driver_revolute: np.ndarray
+    space_dim: int
+
+    def centres_radii(self, QA: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """C (N, n, 3) and r (N, n) for N rows of actuated values (N, na)."""
+        QA = np.atleast_2d(np.asarray(QA, dtype=float))
+        N = QA.shape[0]
+        f = self.fn.map(N) if N > 1 else self.fn
+        C, r = f(QA.T, self.p)
+        n = self.platform_points.shape[0]
+        C = np.array(C).reshape((3, N, n), order="F").transpose(1, 2, 0)
+        r = np.array(r).reshape((N, n))
+        return C, r
 
 
 def _build_nlp(topo: Topology) -> Any:
@@ -695,6 +816,43 @@ def _build_nlp(topo: Topology) -> Any:
     solver = ca.nlpsol("forward", "ipopt", {"x": x, "p": P, "f": f, "g": g}, opts)
     topo._store["nlp_build_time"] = time.perf_counter() - t0
     return solver
+
+
+def _passive_step(topo: Topology) -> ca.Function:
+    """A Gauss-Newton step over the variables of legs in chain form, the platform and q_a
+    fixed: (q_a, x, p) -> (x_next, max |Phi|)."""
+    st = topo.st
+    idx = [i for sl in st.legs if not sl.reduced for i in sl.x]
+    z = st.x[idx]
+    phi = topo.phi_sym
+    J = ca.jacobian(phi, z)
+    dz = -ca.solve(ca.mtimes(J.T, J) + 1e-12 * ca.DM.eye(len(idx)), ca.mtimes(J.T, phi))
+    xn = ca.SX(st.x)
+    for k, i in enumerate(idx):
+        xn[i] = st.x[i] + dz[k]
+    res = ca.mmax(ca.fabs(phi)) if topo.m else ca.SX(0)
+    return ca.Function("passive_step", [st.qa, st.x, st.p], [xn, res])
+
+
+def _nearest_root(step, starts, angle, length, tol, iters: int = 40):
+    """Iterate ``step(z) -> (z_next, res)`` from each start; the converged z nearest zero
+    (angles wrapped, lengths scaled), or None."""
+    best, best_n = None, np.inf
+    for z in starts:
+        z = np.array(z, dtype=float)
+        r = np.inf
+        for _ in range(iters):
+            zn, r = step(z)
+            zn = np.array(zn).ravel()
+            if not np.all(np.isfinite(zn)):
+                break
+            z = zn
+        if np.all(np.isfinite(z)) and float(r) < tol:
+            w = np.where(angle, np.remainder(z + np.pi, 2 * np.pi) - np.pi, z / length)
+            nz = float(np.linalg.norm(w))
+            if nz < best_n:
+                best, best_n = np.where(angle, np.remainder(z + np.pi, 2 * np.pi) - np.pi, z), nz
+    return best
 
 
 def _pad3(v: np.ndarray) -> np.ndarray:

@@ -149,7 +149,7 @@ def parse_guess(model: Model, qa: np.ndarray, guess: Any) -> np.ndarray:
     nq = len(mech.joint_names)
     npas = nq - mech.n_actuated
     if g.shape == (4, 4):
-        return model.x_from_pose(g)
+        return model.x_from_pose(g, qa)
     if g.ndim == 1 and g.size == model.nx:
         return g.copy()
     if g.ndim == 1 and g.size == nq:
@@ -161,7 +161,7 @@ def parse_guess(model: Model, qa: np.ndarray, guess: Any) -> np.ndarray:
         q[~act] = g
         return model.x_from_q(q)
     if g.ndim == 1 and g.size == mech.task_dim and model.platform is not None:
-        return model.x_from_task(g)
+        return model.x_from_task(g, qa)
     raise MechanismError(
         f"guess: expected the unknowns x ({model.nx}: {list(model.x_names)}), all joints ({nq}), "
         f"the passive joints ({npas}), a 4x4 pose or a KinResult; got shape {g.shape}",
