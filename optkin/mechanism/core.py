@@ -221,6 +221,12 @@ class Mechanism:
             raise MechanismError(f"reduced: expected True or False, got {_show(reduced)}",
                                  path=("reduced",))
         legs_t = validate_legs(legs, platform, redundant=bool(redundant))
+        if platform == "spatial_translational" and all(
+                leg.type in ("RUS", "RSS") for leg in legs_t):
+            # a Delta: each forearm is a parallelogram of two S-S rods (Grubler's count;
+            # the model keeps the equivalent R-U-S chain), whose spins are idle
+            for leg in legs_t:
+                object.__setattr__(leg, "inventory", ((1, 3, 3, 3, 3), 3, 2))
         m = object.__new__(cls)
         m.kind = "legs"
         m.name = _name(name)
