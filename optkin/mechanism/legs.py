@@ -160,6 +160,8 @@ class Leg:
     inventory : tuple
         (joint freedoms, moving links, idle freedoms) of the physical leg, for Grubler's
         count (a Delta's parallelogram is two S-S rods, not R + U + S).
+    positive : tuple of int
+        Variables that must stay positive (a leg's length between its joints).
     """
 
     type: str
@@ -180,6 +182,7 @@ class Leg:
     axis: np.ndarray | None = None
     arm: np.ndarray | None = None
     inventory: tuple[tuple[int, ...], int, int] = ((), 0, 0)
+    positive: tuple[int, ...] = ()
     spec: Mapping[str, Any] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ structure
@@ -660,8 +663,10 @@ def _rps_leg(base, platform, axis) -> Leg:
     f1 = np.cross(v, ax)       # the spherical's axes: (f1, ax, v), orthonormal
     S = [revolute_screw(ax, A), prismatic_screw(v), revolute_screw(f1, A),
          revolute_screw(ax, A), revolute_screw(v, A)]
-    return _point_leg("RPS", "RPS", S, ("theta", "rho", "sa", "sb", "sc"), 1, A, platform, 3,
-                      True, None, **_geo(base, platform, axis=_frozen(ax)))
+    leg = _point_leg("RPS", "RPS", S, ("theta", "rho", "sa", "sb", "sc"), 1, A, platform, 3,
+                     True, None, **_geo(base, platform, axis=_frozen(ax)))
+    object.__setattr__(leg, "positive", (1,))
+    return leg
 
 
 @leg_type("PRS", 3, ("s", "theta", "sa", "sb", "sc"), 0,
@@ -709,7 +714,7 @@ def _upu_leg(base, platform, axis, arm) -> Leg:
     return Leg(type="UPU", joints="UPU", screws=_frozen(np.array(S)),
                names=("ua", "ub", "rho", "va", "vb"), actuated=(2,), home=_frozen(home),
                end="frame", platform_point=_frozen(b), dim=3, inventory=((2, 1, 2), 2, 0),
-               **_geo(base, platform, axis=_frozen(a1), arm=_frozen(a2)))
+               positive=(2,), **_geo(base, platform, axis=_frozen(a1), arm=_frozen(a2)))
 
 
 @leg_type("PSP", 3, ("s", "sa", "sb", "sc", "t"), 0, {"direction": 3, "axis": 3},
@@ -773,7 +778,9 @@ def validate_legs(legs: Sequence[Any], platform: str, redundant: bool = False) -
             raise MechanismError(
                 f"legs: a redundantly actuated {platform!r} platform needs more than {dof} "
                 f"actuated joints, got {n_act}; drop redundant=True for {dof}", path=("legs",))
-    elif n_act != dof and not all(leg.end == "frame" for leg in out):
+    elif n_act != dof and all(leg.distance is not None for leg in out):
+        # distance legs leave the platform all its freedoms: one actuator each (legs in
+        # chain form constrain it; the model checks that their closure is square)
         hint = "; pass redundant=True for redundant actuation" if n_act > dof else ""
         raise MechanismError(
             f"legs: a {platform!r} platform has {dof} degrees of freedom and needs {dof} "

@@ -32,6 +32,7 @@ import numpy as np
 from .._cache import KeyedCache
 from ..errors import MechanismError
 from ..mechanism import Mechanism
+from ..mechanism.joints import JOINT_TYPES
 from ..mechanism.platforms import PLATFORMS
 from . import compiled as cc
 from . import fused
@@ -282,7 +283,8 @@ class Model:
 
     __slots__ = ("mech", "topology", "p", "length", "na", "nx", "m", "x_names", "x_angle",
                  "x_scale", "row_names", "row_leg", "row_length", "passive_index", "qp_index", "qc_index",
-                 "qa_positive", "build_time", "_tls", "_uses", "_frozen", "__weakref__")
+                 "qa_positive", "build_time", "_tls", "_uses", "_frozen", "_spherical",
+                 "__weakref__")
 
     def __init__(self, mech: Mechanism) -> None:
         t0 = time.perf_counter()
@@ -316,14 +318,33 @@ class Model:
         set_(self, "qp_index", np.flatnonzero(~act & ~is_cut))
         set_(self, "qc_index", np.flatnonzero(is_cut))
         qpos = np.zeros(topo.na, dtype=bool)
+        s_x: list[tuple[int, int, int]] = []
+        s_q: list[tuple[int, int, int]] = []
         if mech.kind == "legs":
             k = 0
-            for leg in mech.legs:
+            for leg, sl in zip(mech.legs, st.legs):
                 for a in leg.actuated:
-                    qpos[k] = leg.distance is not None and leg.distance.length is None \
-                        and leg.kinds[a] == "P"
+                    qpos[k] = (leg.distance is not None and leg.distance.length is None
+                               and leg.kinds[a] == "P") or a in leg.positive
                     k += 1
+                # spherical joints solved in chain form: three angles, two branches of one
+                # rotation (canonical: the middle angle's cosine >= 0)
+                v = 0
+                for c in leg.joints:
+                    n_ = len(JOINT_TYPES[c].kinds)
+                    if c == "S" and not sl.reduced and sl.q.start + v not in sl.reported:
+                        s_q.append(tuple(sl.q.start + v + i for i in range(3)))
+                    v += n_
+            xpos = {}
+            for sl, leg in zip(st.legs, mech.legs):
+                free = [v_ for v_ in range(len(leg.names)) if v_ not in leg.actuated
+                        and sl.q.start + v_ not in sl.reported]
+                if not sl.reduced:
+                    for v_, xi in zip(free, sl.x):
+                        xpos[sl.q.start + v_] = xi
+            s_x = [tuple(xpos[i] for i in t) for t in s_q if all(i in xpos for i in t)]
         set_(self, "qa_positive", qpos)
+        set_(self, "_spherical", (tuple(s_x), tuple(s_q)))
         set_(self, "_tls", threading.local())
         set_(self, "_uses", [0])
         mode = cc.compile_mode()
@@ -543,7 +564,14 @@ class Model:
         plat = self.platform
         if plat is not None and plat.norm_row:
             x[: self.n_platform] = plat.canonical(x[: self.n_platform])
+        _canonical_spherical(x, self._spherical[0])
         return x
+
+    def canonical_q(self, q: np.ndarray) -> np.ndarray:
+        """Joint values with the angles of spherical joints on their canonical branch."""
+        q = np.array(q, dtype=float)
+        _canonical_spherical(q, self._spherical[1])
+        return q
 
     def default_x(self, qa: np.ndarray) -> np.ndarray:
         """A default starting point: the mechanism's home, else a central configuration."""
@@ -816,6 +844,18 @@ def _build_nlp(topo: Topology) -> Any:
     solver = ca.nlpsol("forward", "ipopt", {"x": x, "p": P, "f": f, "g": g}, opts)
     topo._store["nlp_build_time"] = time.perf_counter() - t0
     return solver
+
+
+def _canonical_spherical(v: np.ndarray, triplets) -> None:
+    """(a, b, c) -> (a + pi, pi - b, c + pi) where cos b < 0: the same rotation
+    Rot(a) Rot(b) Rot(c) about orthonormal axes, with b in [-pi/2, pi/2]; angles wrapped."""
+    for i, j, k in triplets:
+        if math.isfinite(v[j]) and math.cos(v[j]) < 0:
+            v[i], v[j], v[k] = v[i] + math.pi, math.pi - v[j], v[k] + math.pi
+        for t in (i, j, k):
+            if math.isfinite(v[t]):
+                a = math.remainder(v[t], 2 * math.pi)
+                v[t] = math.pi if a <= -math.pi else a
 
 
 def _passive_step(topo: Topology) -> ca.Function:

@@ -231,13 +231,18 @@ def _search(model: Model, part: SearchPart, T: np.ndarray, xplat: np.ndarray | N
         return [], runs, 0
     Z = np.array(cands).T
     Z[angle[full_idx]] = wrap_angle(Z[angle[full_idx]])
+    patches = []
+    for j in range(Z.shape[1]):
+        q = np.zeros(nq)
+        q[vars_[full_idx]] = Z[:, j]
+        q = model.canonical_q(q)  # one representation of each spherical joint's rotation
+        Z[:, j] = q[vars_[full_idx]]
     keep = distinct(Z, angle[full_idx], scale[full_idx], 1e-6)
-    out = []
     for j in keep:
         patch = np.full(nq, np.nan)
         patch[vars_[full_idx]] = Z[:, j]
-        out.append(patch)
-    return out, runs, converged
+        patches.append(patch)
+    return patches, runs, converged
 
 
 def _multistart(model: Model, step, param: np.ndarray, lo, hi, n: int, iters: int, seed: int,
