@@ -104,7 +104,9 @@ def _select_rows(st: Structure, p: np.ndarray, mech: Mechanism, samples: int = 4
     if phi.shape[0] == 0:
         return []
     v = ca.vertcat(st.qa, st.x)
-    f = ca.Function("rows", [v, st.p], [phi, ca.jacobian(phi, v)])
+    f = st.cache.get("rows")
+    if f is None:  # once per structure: every geometry of it is checked with this Function
+        f = st.cache["rows"] = ca.Function("rows", [v, st.p], [phi, ca.jacobian(phi, v)])
     rng = np.random.default_rng(seed)
     n = v.shape[0]
     L = float(p[-1])

@@ -119,6 +119,7 @@ class Structure:
     z_x: np.ndarray = None          # type: ignore[assignment]  where x's entries sit in z
     leg_frames: list[tuple[ca.SX, ca.SX]] = field(default_factory=list)  # (T_end(q), kind)
     distance: list[tuple[Any, Any, Any] | None] = field(default_factory=list)
+    cache: dict[str, Any] = field(default_factory=dict)  # Functions built once per structure
 
 
 def structure_key(mech: Mechanism, reduced: bool = True) -> tuple:
