@@ -1,10 +1,11 @@
 """Distance-to-singularity and manipulability maps over a 2-D slice, drawn as PNG.
 
-:func:`singularity_map` samples a grid: for leg-described platforms over two task
-coordinates (the others fixed), solving the inverse model leg by leg in one working mode;
-for Khalil mechanisms over two active joints (the others fixed), solving the direct model
-with warm starts along the grid. At each point it evaluates, from :func:`optkin.jacobians`
-(dimensionless matrices, as in :func:`optkin.classify`):
+:func:`singularity_map` samples a grid: for platforms (models whose poses are task
+coordinates) over two task coordinates (the others fixed), solving the inverse model leg
+by leg in one working mode; for Khalil mechanisms over two active joints (the others
+fixed), solving the direct model with warm starts along the grid. At each point it
+evaluates, from :func:`optkin.jacobians` (dimensionless matrices, as in
+:func:`optkin.classify`):
 
 * ``parallel``: the parallel margin of :func:`optkin.classify` (sigma_min of A, or of W_p
   for Khalil mechanisms, relative to the constraint Jacobian) - zero at a parallel
@@ -32,13 +33,13 @@ from ..errors import MechanismError
 from ..limits import Deadline, check_size, show
 from ..mechanism import Mechanism
 from ..model import get_model
+from ..model.analysis import task_rows
 from ..results import KinResult
 from .velocity import jacobians
 
 __all__ = ["SingularityMap", "singularity_map", "plot_singularity_map", "MEASURES"]
 
 MEASURES = ("distance", "parallel", "serial", "manipulability")
-_TASK_TO_TWIST = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
 
 
 @dataclass
@@ -89,13 +90,8 @@ def _measures(jac: Any) -> dict[str, float]:
     qa_scale = np.where(np.array(mech.revolute)[act], 1.0, L)
     rep = classify(mech, jac.q)
     par, ser = rep.margins["parallel"], rep.margins["serial"]
-    if mech.kind == "legs":
-        idx = {"vx": 0, "vy": 1, "vz": 2, "wx": 3, "wy": 4, "wz": 5}
-        rows = [idx[n] for n in jac.twist_names]
-        J = jac.J_a
-    else:
-        rows = [_TASK_TO_TWIST[t] for t in mech.task]
-        J = jac.J_a[rows]
+    rows = task_rows(model)
+    J = jac.J_task
     J = np.array([1.0 / L if i < 3 else 1.0 for i in rows])[:, None] * J * qa_scale[None, :]
     sv = np.linalg.svd(J, compute_uv=False)
     return {"parallel": float(par), "serial": float(ser), "distance": float(min(par, ser)),
@@ -154,7 +150,8 @@ def singularity_map(
     guess = _guess_arg(guess)
     stopped: str | None = None
     vals = {k: np.full((v.size, u.size), np.nan) for k in MEASURES}
-    if mech.kind == "legs":
+    model = get_model(mech)
+    if model.platform is not None:  # poses are task coordinates: the inverse model
         names = list(mech.task)
         ax = ax_given if ax_given is not None else (names[0], names[1])
         for a in ax:
@@ -166,7 +163,7 @@ def singularity_map(
             if k not in names:
                 raise MechanismError(f"fixed: {show(k)} is not a task coordinate ({names})")
             base[names.index(k)] = val
-        mode = _mode_arg(working_mode, len(mech.legs))
+        mode = _mode_arg(working_mode, model.na)
         checkpoint()  # validation stops here: every argument is checked
         for i, vv in enumerate(v):
             if stopped:
@@ -384,8 +381,8 @@ def _mode_arg(mode: Any, n: int) -> tuple[int, ...] | None:
     except MechanismError:
         m = np.zeros(0)
     if m.size != n or not np.all(np.isin(m, (-1.0, 1.0))):
-        raise MechanismError(f"working_mode: expected {n} signs (+1 or -1), one per leg, got "
-                             f"{show(mode)}")
+        raise MechanismError(f"working_mode: expected {n} signs (+1 or -1), one per actuated "
+                             f"leg, got {show(mode)}")
     return tuple(int(x) for x in m)
 
 

@@ -10,7 +10,11 @@
 * ``mobility`` - N = min_q dim null(J(q)) [7.58] over random closed configurations, with
   c = max_q rank J(q) [7.59] the number of independent constraints. J is the constraint
   Jacobian over every joint (Khalil tables), or over every leg joint and the platform
-  coordinates (leg-described platforms).
+  coordinates (leg-described platforms: each leg's chain reaches the platform frame, its
+  reported end joint included).
+
+The links and joints counted come from the model (:func:`optkin.model.analysis.
+joint_inventory`): each leg's inventory, a Khalil table's frames and the rank of its loops.
 
 They disagree for overconstrained linkages (Bennett: Grubler -2, mobility 1) and when
 links spin idly (S-S rods): the report says so in ``message``.
@@ -21,7 +25,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import casadi as ca
 import numpy as np
 
 from .. import numeric
@@ -30,9 +33,9 @@ from .._checks import show as _show
 from .._dryrun import checkpoint
 from ..errors import MechanismError, NumericError
 from ..mechanism import Mechanism
-from ..model import get_model
-from ..model import khalil as kh
-from ._functions import analysis_functions
+from ..model import Model, get_model
+from ..model.analysis import analysis_functions, z_of
+from ..model.analysis import joint_inventory as _joint_inventory
 
 __all__ = ["DofReport", "dof", "closed_configurations", "joint_inventory", "MAX_SAMPLES"]
 
@@ -103,80 +106,16 @@ class DofReport:
 
 
 # ----------------------------------------------------------------------------- counting
-#: leg type -> joint freedoms along the leg (base to platform), movable links, idle spins
-_LEG_JOINTS: dict[str, tuple[tuple[int, ...], int, int]] = {
-    "RPR": ((1, 1, 1), 2, 0),
-    "RRR": ((1, 1, 1), 2, 0),
-    "UPS": ((2, 1, 3), 2, 0),
-    "SPS": ((3, 1, 3), 2, 1),
-    "RUS": ((1, 2, 3), 2, 0),
-    "RSS": ((1, 3, 3), 2, 1),
-}
-
-
-def joint_inventory(mech: Mechanism) -> dict[str, Any]:
+def joint_inventory(mech: Mechanism | Model) -> dict[str, Any]:
     """Links, joints (with their freedoms) and loop subspace dimensions of ``mech``.
 
     Khalil tables: one movable link per tree joint frame, one joint per joint variable (cut
     joints included), lambda of each loop = generic rank of its six closure rows.
-    Platforms: the joints of each leg type (table ``_LEG_JOINTS``) plus the platform; legs of
-    a point platform meet in one multiple revolute (l - 1 joints, no platform body); the
-    legs of a translational (Delta) platform are R + a parallelogram of two S-S rods.
+    Platforms: the joints of each leg (its ``inventory``) plus the platform; legs of a point
+    platform meet in one multiple joint (l - 1 joints, no platform body); the legs of a
+    Delta are R + a parallelogram of two S-S rods (their inventory says so).
     """
-    if mech.kind == "khalil":
-        table = mech.table
-        n_links = sum(1 for f in table.frames[: table.n] if f.is_joint)
-        freedoms = [1] * len(mech.joint_names)
-        lam = _loop_lambda(mech)
-        return {"n_links": n_links, "freedoms": freedoms, "lambda": lam,
-                "loops": len(freedoms) - n_links, "idle": 0}
-    space = 3 if mech.planar else 6
-    freedoms: list[int] = []
-    n_links = 0
-    idle = 0
-    nl = len(mech.legs)
-    if mech.platform == "planar_point":
-        for leg in mech.legs:
-            fr, links, _ = _LEG_JOINTS[leg.type]
-            freedoms += list(fr[:-1])
-            n_links += links
-        freedoms += [1] * (nl - 1)  # the multiple revolute where the legs meet
-    elif mech.platform == "spatial_translational" and all(
-            leg.type in ("RUS", "RSS") for leg in mech.legs):
-        for _ in mech.legs:
-            freedoms += [1, 3, 3, 3, 3]  # base R, two S-S rods of the parallelogram
-            n_links += 3  # arm + two rods
-            idle += 2
-        n_links += 1
-    else:
-        for leg in mech.legs:
-            fr, links, idl = _LEG_JOINTS[leg.type]
-            freedoms += list(fr)
-            n_links += links
-            idle += idl
-        n_links += 1
-    loops = len(freedoms) - n_links
-    return {"n_links": n_links, "freedoms": freedoms, "lambda": [space] * loops,
-            "loops": loops, "idle": idle}
-
-
-def _loop_lambda(mech: Mechanism, samples: int = 4, seed: int = 11) -> list[int]:
-    """Generic rank of each loop's six closure rows (3 planar/spherical, 6 spatial)."""
-    nq = len(mech.joint_names)
-    q = ca.SX.sym("q", nq)
-    rows, _ = kh.closure_rows(mech, kh.frames_0(mech, q))
-    f = ca.Function("all_rows_jac", [q], [ca.jacobian(rows, q)])
-    rng = np.random.default_rng(seed)
-    G = np.hstack([np.array(f(rng.uniform(-np.pi, np.pi, nq))) for _ in range(samples)])
-    out = []
-    for j in range(mech.table.loops):
-        g = G[6 * j: 6 * j + 6]
-        if not np.isfinite(g).all():  # cannot happen for finite geometry: say so, not hang
-            raise MechanismError(f"the closure rows of loop {j + 1} are not finite at random "
-                                 "joint values; check the table's geometry", path=("rows",))
-        scale = max(1.0, float(np.abs(g).max()))
-        out.append(numeric.rank(g, f"loop {j + 1}", rtol=0.0, atol=1e-9 * scale))
-    return out
+    return _joint_inventory(mech if isinstance(mech, Model) else get_model(mech))
 
 
 # ----------------------------------------------------------------------------- sampling
@@ -193,21 +132,28 @@ def closed_configurations(
     tol = as_float(tol, "closed_configurations: tol", lo=0.0, path=("tol",))
     max_starts = as_int(max_starts, "closed_configurations: max_starts", lo=0,
                         hi=MAX_SAMPLES * 12, path=("max_starts",))
-    f = analysis_functions(mech)
     model = get_model(mech)
+    f = analysis_functions(model)
     rng = np.random.default_rng(seed)
     L = model.length
     nv = f.nvar
+    rows_q = model.bind(f.rows_q)
 
     def fun(z):
-        return np.array(f.rows_q(z)[0]).ravel()
+        return np.array(rows_q(z)[0]).ravel()
 
     def jac(z):
-        return np.array(f.rows_q(z)[1])
+        return np.array(rows_q(z)[1])
 
     prismatic = np.zeros(nv, bool)
     nj = len(mech.joint_names)
     prismatic[:nj] = ~np.array(mech.revolute)
+    x_home = None
+    if model.n_platform:  # start near a central pose of the platform
+        with np.errstate(all="ignore"):
+            x_home = model.default_x(np.zeros(model.na) + L)
+        if not np.all(np.isfinite(x_home)):
+            x_home = None
     out: list[np.ndarray] = []
     worst = 0.0
     for _ in range(max_starts):
@@ -215,10 +161,10 @@ def closed_configurations(
             break
         z0 = rng.uniform(-np.pi, np.pi, nv)
         z0[prismatic] = rng.uniform(0.5, 1.5, prismatic.sum()) * L
-        if mech.kind == "legs":
-            x0 = model.default_x(np.zeros(model.na) + L)
-            x0 = x0 + rng.normal(0, 0.05, x0.size) * model.x_scale
-            z0[nj:] = x0
+        if x_home is not None:
+            x0 = x_home + rng.normal(0, 0.05, x_home.size) * model.x_scale
+            zp = z_of(model, np.zeros(nj), x0)
+            z0[nj:] = zp[nj:]
         z, r = _gauss_newton(fun, jac, z0)
         if r <= tol:
             out.append(z)
@@ -254,19 +200,25 @@ def _gauss_newton(fun, jac, z, max_iter: int = 100) -> tuple[np.ndarray, float]:
     return z, float(np.max(np.abs(r))) if r.size else 0.0
 
 
+def var_scale(model: Model) -> np.ndarray:
+    """The scale of each joint-level variable z: the mechanism's size for prismatic joints
+    and platform positions, 1 for angles (and unit quaternions)."""
+    f = analysis_functions(model)
+    L = model.length
+    nj = len(model.mech.joint_names)
+    cs = np.ones(f.nvar)
+    cs[:nj][~np.array(model.mech.revolute)] = L
+    cs[f.z_x] = model.x_scale
+    return cs
+
+
 def _scaled(mech: Mechanism, J: np.ndarray) -> np.ndarray:
     """Rows of lengths divided and prismatic/position columns multiplied by the length
     scale, so that the singular values are dimensionless."""
-    f = analysis_functions(mech)
     model = get_model(mech)
-    L = model.length
-    nj = len(mech.joint_names)
-    cs = np.ones(J.shape[1])
-    cs[:nj][~np.array(mech.revolute)] = L
-    if mech.kind == "legs":
-        cs[nj:] = model.x_scale
-    rs = np.where(f.row_length, 1.0 / L, 1.0)
-    return rs[:, None] * J * cs[None, :]
+    f = analysis_functions(model)
+    rs = np.where(f.row_length, 1.0 / model.length, 1.0)
+    return rs[:, None] * J * var_scale(model)[None, :]
 
 
 def rank_of(s: np.ndarray, rtol: float) -> int:
@@ -326,11 +278,12 @@ def dof(mech: Mechanism, samples: int = 5, seed: int = 0, rtol: float = 1e-8) ->
     hist: dict[int, int] = {}
     for k in freedoms:
         hist[k] = hist.get(k, 0) + 1
-    f = analysis_functions(mech)
+    model = get_model(mech)
+    rows_q = model.bind(analysis_functions(model).rows_q)
     confs, worst = closed_configurations(mech, n=samples, seed=seed)
     nullity, ranks = [], []
     for z in confs:
-        J = np.array(f.rows_q(z)[1])
+        J = np.array(rows_q(z)[1])
         try:
             s = numeric.singular_values(_scaled(mech, J), "constraint Jacobian")
         except NumericError:  # undefined at this sample: leave it out
@@ -361,7 +314,9 @@ def dof(mech: Mechanism, samples: int = 5, seed: int = 0, rtol: float = 1e-8) ->
                + f" but the constraint Jacobian has rank {c} and nullity {mob} at every sampled "
                "closed configuration: the linkage is "
                + ("overconstrained (special geometry, e.g. Bennett)" if mob > grub - idle
-                  else "underconstrained by the count")
+                  else "constrained beyond what its joints count (the platform kind keeps "
+                  "freedoms fixed that the legs' joints leave free, e.g. a translational "
+                  "platform on legs that do not hold its orientation)")
                + f"; it moves with {mob} degree(s) of freedom")
     return DofReport(
         mech_name=mech.name, grubler=grub, mobility=mob, constraints=c, agree=bool(agree),

@@ -9,16 +9,18 @@ when its margin is below ``rtol``.
 
 ===================== ======================================================================
 ``serial``            J1 of [7.60] singular: some qdot_a != 0 gives no end-effector motion.
-                      Platforms: B (Chablat-Wenger) singular - a leg at a PSIK/MSIK pose.
-                      Khalil mechanisms: some M_a qdot_a lies in range(M_p) for
-                      M = [H; K_task] = [M_a M_p] (the task rows of J_a lose rank when
-                      W_p is regular).
+                      Platforms whose unknowns are the platform coordinates: B
+                      (Chablat-Wenger) singular - a leg at a PSIK/MSIK pose. Otherwise
+                      (Khalil tables, legs in chain form): some M_a qdot_a lies in
+                      range(M_p) for M = [H; K_task] = [M_a M_p] (the task rows of J_a lose
+                      rank when W_p is regular).
 ``parallel``          J2 of [7.60] singular: the end effector moves with the actuators
-                      locked. Platforms: A singular (PSFK/MSFK); Khalil mechanisms: W_p
-                      singular with a null motion that moves the end effector.
+                      locked. Platforms whose unknowns are the platform coordinates: A
+                      singular (PSFK/MSFK); otherwise W_p singular with a null motion that
+                      moves the end effector.
 ``internal``          W_p of [7.49] singular (seed 000, 7.11): passive motion with
-                      qdot_a = 0 (for platforms W_p = dPhi/dx, so it coincides with
-                      ``parallel``).
+                      qdot_a = 0 (where W_p = dPhi/dx over the platform coordinates it
+                      coincides with ``parallel``).
 ``configuration_space`` rank H < c, c the generic rank of the constraint Jacobian over all
                       joints (Modern Robotics 7.3; bifurcation points of the four-bar).
 ``actuator``          rank H_p < p (MR 7.3).
@@ -45,9 +47,9 @@ from .._checks import as_float
 from .._checks import show as _show
 from ..errors import MechanismError, NumericError
 from ..mechanism import Mechanism
-from ..model import get_model
-from ._functions import analysis_functions
-from .mobility import dof, rank_of
+from ..model import Model, get_model
+from ..model.analysis import analysis_functions, task_rows
+from .mobility import dof, rank_of, var_scale
 from .velocity import Jacobians, jacobians, twist_rows
 
 __all__ = ["SingularityReport", "classify", "CLASSIFY_DEFAULTS", "TYPES"]
@@ -61,8 +63,8 @@ CLASSIFY_DEFAULTS: dict[str, Any] = {
     "second_order_tol": 1e-6,  # |u^T Phi''[v, v]| below this: degenerate
 }
 
-_GENERIC_RANK: dict[str, int] = {}
-_TASK_TO_TWIST = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
+#: Generic ranks kept per topology (one per geometry, most recent last)
+_MAX_RANKS = 256
 
 
 @dataclass
@@ -141,16 +143,22 @@ def _rel_min(M: np.ndarray, k: int | None = None, ref: float | None = None
     return float(s[n - 1] / ref), U, Vt
 
 
-def _generic_rank(mech: Mechanism) -> int:
-    """c of [7.59] (cached per mechanism); the intended count when no closure is found."""
-    c = _GENERIC_RANK.get(mech.key)
+def _generic_rank(model: Model) -> int:
+    """c of [7.59] for the model's geometry (kept in its topology's cache); the intended
+    count when no closure is found."""
+    store: dict[bytes, int] = model.cached("generic_rank", dict)
+    key = model.p.tobytes()
+    c = store.get(key)
     if c is None:
+        mech = model.mech
         rep = dof(mech, samples=3)
-        if rep.success:
-            c = rep.constraints
-        else:
-            c = analysis_functions(mech).nvar - mech.dof
-        _GENERIC_RANK[mech.key] = c
+        c = rep.constraints if rep.success else analysis_functions(model).nvar - mech.dof
+        while len(store) >= _MAX_RANKS:
+            try:
+                del store[next(iter(store))]
+            except (KeyError, StopIteration, RuntimeError):  # another thread got there first
+                break
+        store[key] = c
     return c
 
 
@@ -204,7 +212,7 @@ def _undefined_report(jac: Jacobians, rtol: float, message: str) -> SingularityR
 
 def _classify(mech: Mechanism, jac: Jacobians, rtol: float, tol2: float) -> SingularityReport:
     model = get_model(mech)
-    f = analysis_functions(mech)
+    f = analysis_functions(model)
     L = model.length
     act = np.array(mech.actuated)
     types: set[str] = set()
@@ -214,28 +222,17 @@ def _classify(mech: Mechanism, jac: Jacobians, rtol: float, tol2: float) -> Sing
 
     # scaling of the model-level matrices
     qa_scale = np.where(np.array(mech.revolute)[act], 1.0, L)
-    if mech.kind == "khalil":
-        x_rows_len = np.array([n.split(".")[-1].startswith("p") for n in model.row_names])
-    else:
-        x_rows_len = np.array([n.startswith("leg:") for n in model.row_names])
-    rs = np.where(x_rows_len, 1.0 / L, 1.0)
+    rs = np.where(model.row_length, 1.0 / L, 1.0)
     _, Wp_m, Wa_m = (np.array(v) for v in model.jac(jac.qa, jac.x))
     Wp_s = rs[:, None] * Wp_m * model.x_scale[None, :]
 
     # joint-level H and K (scaled)
-    nj = len(mech.joint_names)
-    var_scale = np.ones(f.nvar)
-    var_scale[:nj][~np.array(mech.revolute)] = L
-    if mech.kind == "legs":
-        var_scale[nj:] = model.x_scale
-    Hs = np.where(f.row_length, 1.0 / L, 1.0)[:, None] * jac.H * var_scale[None, :]
-    tw = twist_rows(mech)
-    if mech.kind == "khalil":
-        task_rows = [_TASK_TO_TWIST[t] for t in mech.task]
-    else:
-        task_rows = tw
-    krs = np.array([1.0 / L if i < 3 else 1.0 for i in task_rows])
-    Ks = krs[:, None] * jac.K[task_rows] * var_scale[None, :]
+    vs = var_scale(model)
+    Hs = np.where(f.row_length, 1.0 / L, 1.0)[:, None] * jac.H * vs[None, :]
+    tw = twist_rows(model)
+    trows = task_rows(model)
+    krs = np.array([1.0 / L if i < 3 else 1.0 for i in trows])
+    Ks = krs[:, None] * jac.K[trows] * vs[None, :]
     pas = np.ones(f.nvar, bool)
     pas[np.flatnonzero(act)] = False
 
@@ -250,10 +247,12 @@ def _classify(mech: Mechanism, jac: Jacobians, rtol: float, tol2: float) -> Sing
         nulls["internal"] = Vt_int[-1] * model.x_scale
 
     # parallel
-    if mech.kind == "legs":
+    if jac.A is not None and jac.B is not None:
+        legrows = np.flatnonzero(model.row_leg >= 0)
         E_scale = np.array([L if i < 3 else 1.0 for i in tw])
-        A_s = (jac.A / L) * E_scale[None, :]
-        B_s = (jac.B / L) * qa_scale[None, :]
+        ls = rs[legrows][:, None]
+        A_s = (jac.A * ls) * E_scale[None, :]
+        B_s = (jac.B * ls) * qa_scale[None, :]
         m_par, _, Vt_par = _rel_min(A_s, ref=numeric.norm2(np.hstack([A_s, B_s]), "[A B]"))
         margins["parallel"] = m_par
         if m_par < rtol:
@@ -265,8 +264,9 @@ def _classify(mech: Mechanism, jac: Jacobians, rtol: float, tol2: float) -> Sing
             row = np.concatenate([A_s[i], B_s[i]])
             nr = float(np.linalg.norm(row))
             leg_m.append(float(np.linalg.norm(B_s[i]) / nr) if nr > 0 else 0.0)
-        margins["serial"] = float(min(leg_m))
-        legs_psik = tuple(i + 1 for i, v in enumerate(leg_m) if v < rtol)
+        margins["serial"] = float(min(leg_m)) if leg_m else float("inf")
+        legs_psik = tuple(sorted({int(model.row_leg[legrows[i]]) + 1
+                                  for i, v in enumerate(leg_m) if v < rtol}))
         if legs_psik:
             types.add("serial")
     else:
@@ -275,8 +275,12 @@ def _classify(mech: Mechanism, jac: Jacobians, rtol: float, tol2: float) -> Sing
             sv = numeric.singular_values(Wp_s, "W_p")
             k = int(np.sum(sv < rtol * ref_int)) + (Wp_s.shape[1] - sv.size)
             V = Vt_int[-max(k, 1):]
-            Kx = Ks[:, pas]
-            move = numeric.norm2(Kx @ V.T, "K V") / max(numeric.norm2(Ks, "K"), 1e-300)
+            # the end-effector twist over the model's unknowns (scaled as Ks)
+            Ka, Kx = (np.array(v) for v in f.twist(jac.qa, jac.x, model.p))
+            Ka_s = krs[:, None] * Ka[trows] * qa_scale[None, :]
+            Kx_s = krs[:, None] * Kx[trows] * model.x_scale[None, :]
+            ref_k = numeric.norm2(np.hstack([Ka_s, Kx_s]), "K")
+            move = numeric.norm2(Kx_s @ V.T, "K V") / max(ref_k, 1e-300)
             if move > np.sqrt(rtol):
                 types.add("parallel")
         # serial: J1 of [7.60]. With M = [H; K_task] split into active columns M_a and
@@ -296,7 +300,7 @@ def _classify(mech: Mechanism, jac: Jacobians, rtol: float, tol2: float) -> Sing
             nulls["serial"] = numeric.svd(Rm, "J1")[2][-1] * qa_scale
 
     # Modern Robotics: configuration space, actuator, end effector
-    c = _generic_rank(mech)
+    c = _generic_rank(model)
     m_cs, _, _ = _rel_min(Hs, c, ref=numeric.norm2(np.vstack([Hs, Ks]), "[H; K]"))
     margins["configuration_space"] = m_cs
     if m_cs < rtol:
@@ -364,7 +368,7 @@ def _degenerate(jac: Jacobians, model: Any, f: Any, Wp_s: np.ndarray, rs: np.nda
     Ms = []
     for j in range(k_l):
         u = rs * Ul[:, j]  # weights on the unscaled rows
-        Hx = np.array(f.hess_x(jac.qa, jac.x, u))
+        Hx = np.array(f.hess_x(jac.qa, jac.x, u, model.p))
         Dv = model.x_scale[:, None] * V
         Ms.append(Dv.T @ Hx @ Dv)
     if not all(np.isfinite(M).all() for M in Ms):  # second derivatives overflow: no verdict

@@ -12,11 +12,17 @@ configuration the position and the x/y rotation rows of a loop do not depend on 
 velocity of a revolute cut joint (its frame origin and z axis do not move with it), so
 the rows split into the two block rows of [7.49] exactly as in Example 7.8 (ii).
 
-Leg-described platforms (seed 004): the model rows f_i(q_a, x) = |P_i(x) - C_i(q_a,i)| - l_i
-give Chablat and Wenger's A t + B qdot_a = 0 with A = (df/dx) E(x) (E maps the platform
-twist t to coordinate rates x_dot) and B = df/dq_a diagonal; H_a, H_p of Modern Robotics
-(7.13) come from a joint-level closure (each leg chain reaches the platform), with the
-platform coordinates as extra passive coordinates.
+Leg-described platforms (seed 004): where the model's unknowns are the platform
+coordinates (every leg in its reduced form), the model rows f_i(q_a, x) = |P_i(x) -
+C_i(q_a,i)| - l_i give Chablat and Wenger's A t + B qdot_a = 0 with A = (df/dx) E(x) (E
+maps the platform twist t to coordinate rates x_dot) and B = df/dq_a diagonal. Legs in
+their chain form add their passive joints to the unknowns; the velocity model is then
+[7.49] without cut joints. H_a, H_p of Modern Robotics (7.13) come from the joint-level
+closure (each leg chain reaches the platform), with the platform coordinates as extra
+passive coordinates.
+
+Every matrix comes from the model's interface (:mod:`optkin.model.analysis`): the split of
+[7.49] follows the cut joints the model has, whatever the description.
 
 The end-effector twist is t = (v, omega): the velocity of the end-effector frame origin and
 the angular velocity, both in base coordinates (Khalil's [7.44] ordering). For planar
@@ -37,22 +43,19 @@ from .._checks import show as _show
 from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..mechanism import Mechanism
-from ..model import get_model
+from ..model import Model, get_model
+from ..model.analysis import analysis_functions, leg_labels, platform_unknowns_only, task_rows, z_of
+from ..model.analysis import twist_rows as _twist_rows
 from ..results import KinResult, _jsonable
-from ._functions import analysis_functions
 
 __all__ = ["Jacobians", "jacobians", "config_of", "twist_rows", "TWIST_NAMES"]
 
 TWIST_NAMES = ("vx", "vy", "vz", "wx", "wy", "wz")
-_TASK_TO_TWIST = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
 
 
-def twist_rows(mech: Mechanism) -> list[int]:
+def twist_rows(mech: Mechanism | Model) -> list[int]:
     """Which of (vx, vy, vz, wx, wy, wz) the end-effector twist of ``mech`` keeps."""
-    if mech.kind == "khalil":
-        return list(range(6))
-    return {"planar": [0, 1, 5], "planar_point": [0, 1], "spatial": list(range(6)),
-            "spatial_translational": [0, 1, 2]}[mech.platform]
+    return _twist_rows(mech if isinstance(mech, Model) else get_model(mech))
 
 
 def config_of(mech: Mechanism, q: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -107,12 +110,6 @@ def _solve(M: np.ndarray, R: np.ndarray) -> np.ndarray:
         return np.full((M.shape[1],) + R.shape[1:], np.nan)
 
 
-def _quat_rate_matrix(qq: np.ndarray) -> np.ndarray:
-    """G (4x3) with qdot = 0.5 G omega for omega in base coordinates (q = (w, x, y, z))."""
-    w, a, b, c = qq
-    return np.array([[-a, -b, -c], [w, c, -b], [-c, w, a], [b, -a, w]])
-
-
 @dataclass
 class Jacobians:
     """Velocity model of a closed chain at one configuration (see :func:`jacobians`).
@@ -120,9 +117,10 @@ class Jacobians:
     Attributes
     ----------
     W_a, W_p, W_ac, W_pc, W_c : ndarray
-        The blocks of [7.49] (Khalil mechanisms, columns q_a / q_p / q_c in joint order).
-        For leg-described platforms W_a, W_p are the model's dPhi/dq_a and dPhi/dx over the
-        platform coordinates x, and W_ac, W_pc, W_c are empty.
+        The blocks of [7.49] (columns q_a / q_p / q_c in joint order). Without cut joints
+        (platforms) W_a, W_p are the model's dPhi/dq_a and dPhi/dx over its unknowns (the
+        platform coordinates, then the passive joints of legs in chain form), and W_ac,
+        W_pc, W_c are empty.
     W : ndarray
         -W_p^-1 W_a [7.51]: qdot_p (Khalil) or x_dot (platforms) per unit qdot_a.
     W_x : ndarray
@@ -136,10 +134,12 @@ class Jacobians:
     J_s : ndarray
         The same as a spatial twist (omega_s, v_s) of Modern Robotics (6 rows).
     A, B : ndarray or None
-        Chablat and Wenger: A t + B qdot_a = 0 (leg-described platforms; None otherwise).
+        Chablat and Wenger: A t + B qdot_a = 0 (platforms whose model unknowns are the
+        platform coordinates; None otherwise).
     G_statics : ndarray or None
         Stewart-Gough inverse Jacobian from statics (MR 7.2.1): qdot_a = G_statics V_s with
-        V_s = (omega_s, v_s); prismatic spatial legs only.
+        V_s = (omega_s, v_s); spatial platforms whose legs are length-actuated distances
+        only.
     K : ndarray
         End-effector twist Jacobian over all joint variables (``var_names``).
     """
@@ -188,9 +188,10 @@ class Jacobians:
     @property
     def J_task(self) -> np.ndarray:
         """Rows of J_a for the task components of the mechanism (``mech.task``)."""
-        if self.mech.kind == "khalil":
-            return self.J_a[[_TASK_TO_TWIST[t] for t in self.mech.task]]
-        return self.J_a
+        rows = self.info.get("task_rows")
+        if rows is None:
+            return self.J_a
+        return self.J_a[[self.twist_names.index(TWIST_NAMES[i]) for i in rows]]
 
     # ------------------------------------------------------------------ rates
     def passive_rates(self, qa_dot: Any) -> np.ndarray:
@@ -220,38 +221,39 @@ class Jacobians:
         """(Psi, Phi) of [7.52]: (dJ/dt) qdot, by automatic differentiation.
 
         Give either the active rates ``qa_dot`` (the other rates follow from [7.49]) or,
-        for Khalil mechanisms, all joint rates ``qdot`` (``mech.joint_names`` order).
-        Khalil mechanisms: rows in the order of [7.49] (top block Psi, bottom block Phi).
-        Platforms: Psi is the model rows' second derivative at zero accelerations, Phi is
-        empty.
+        where the model's unknowns are joints (Khalil mechanisms), all joint rates
+        ``qdot`` (``mech.joint_names`` order). Rows in the order of [7.49] (top block Psi,
+        bottom block Phi, the rows involving cut joints); without cut joints (platforms)
+        Psi is the model rows' second derivative at zero accelerations and Phi is empty.
         """
-        f = analysis_functions(self.mech)
-        if self.mech.kind == "khalil":
-            if qdot is not None:
-                qd = _rates("qdot", qdot, self.mech.joint_names)
-            elif qa_dot is not None:
-                qd = self.joint_rates(qa_dot)
-            else:
-                raise MechanismError("accel_term: give qa_dot or qdot")
-            a = np.array(f.acc_q(self.q, qd)).ravel()
-            top, bot = self.info["rows_top"], self.info["rows_bottom"]
-            return a[top], a[bot]
-        if qa_dot is None:
-            raise MechanismError("accel_term: give qa_dot (the active rates) for a platform")
-        qa_dot = _rates("qa_dot", qa_dot, self.mech.active_names)
-        xd = self.W_x @ qa_dot
-        a = np.array(f.acc_x(self.qa, self.x, qa_dot, xd)).ravel()
-        return a, np.zeros(0)
+        model = get_model(self.mech)
+        f = analysis_functions(model)
+        nq = len(self.mech.joint_names)
+        act = np.array(self.mech.actuated)
+        if qdot is not None:
+            if np.any(f.z_x >= nq):
+                raise MechanismError("accel_term: give qa_dot (the active rates) for a "
+                                     "platform: its unknowns are not all joints")
+            qd = _rates("qdot", qdot, self.mech.joint_names)
+            qa_dot, xd = qd[act], qd[f.z_x]
+        elif qa_dot is not None:
+            qa_dot = _rates("qa_dot", qa_dot, self.mech.active_names)
+            xd = self.W_x @ qa_dot
+        else:
+            raise MechanismError("accel_term: give qa_dot or qdot")
+        a = np.array(f.acc_x(self.qa, self.x, qa_dot, xd, model.p)).ravel()
+        top, bot = self.info["rows_top"], self.info["rows_bottom"]
+        return a[top], a[bot]
 
     def passive_accelerations(self, qa_dot: Any, qa_ddot: Any) -> np.ndarray:
         """x_ddot (all unknowns of the model) for active rates and accelerations [7.52]."""
-        f = analysis_functions(self.mech)
+        model = get_model(self.mech)
+        f = analysis_functions(model)
         qa_dot = _rates("qa_dot", qa_dot, self.mech.active_names)
         qa_ddot = _rates("qa_ddot", qa_ddot, self.mech.active_names)
-        model = get_model(self.mech)
         _, Wp, Wa = (np.array(v) for v in model.jac(self.qa, self.x))
         xd = self.W_x @ qa_dot
-        a = np.array(f.acc_x(self.qa, self.x, qa_dot, xd)).ravel()
+        a = np.array(f.acc_x(self.qa, self.x, qa_dot, xd, model.p)).ravel()
         return _solve(Wp, -(Wa @ qa_ddot) - a)
 
     def to_dict(self) -> dict[str, Any]:
@@ -317,7 +319,7 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
         raise MechanismError(f"jacobians: tol must be a positive number (default 1e-8), got "
                              f"{_show(tol_in)}", path=("tol",))
     model = get_model(mech)
-    f = analysis_functions(mech)
+    f = analysis_functions(model)
     qv, qa, x = config_of(mech, q)
     checkpoint()  # validation stops here: every argument is checked
     phi_m, Wp_m, Wa_m = (np.array(v) for v in model.jac(qa, x))
@@ -330,80 +332,63 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
         "evaluated there anyway; solve with optkin.forward first"
     )
     if not defined:
-        msg = _undefined_message(mech, model, phi_m, Wp_m, Wa_m)
+        msg = _undefined_message(model, phi_m, Wp_m, Wa_m)
     W_x = _solve(Wp_m, -Wa_m)
     act = np.array(mech.actuated)
-    tw = twist_rows(mech)
-    info: dict[str, Any] = {"defined": defined}
+    nq = qv.size
+    tw = _twist_rows(model)
+    info: dict[str, Any] = {"defined": defined, "nq": nq, "task_rows": task_rows(model)}
     try:
         info["cond_W_p"] = numeric.cond(Wp_m, "W_p") if Wp_m.size else 1.0
     except MechanismError:  # not finite: the model is undefined at q
         info["cond_W_p"] = float("nan")
-    if mech.kind == "khalil":
-        z = qv
-        _, Jq, Kq = (np.array(v) for v in f.rows_q(z))
-        names = np.array(mech.joint_names)
-        cut = set(mech.cut_names)
-        ia = np.flatnonzero(act)
-        ip = np.array([i for i in range(len(names)) if not act[i] and names[i] not in cut], int)
-        ic = np.array([i for i in range(len(names)) if names[i] in cut], int)
-        Jc = Jq[:, ic]
-        scale = max(1.0, float(np.abs(Jq).max())) if Jq.size else 1.0
-        has_c = np.any(np.abs(Jc) > 1e-7 * scale, axis=1) if ic.size else np.zeros(len(Jq), bool)
-        top = np.flatnonzero(~has_c)
-        bot = np.flatnonzero(has_c)
-        info["split"] = "rows"
-        W_a, W_p = Jq[np.ix_(top, ia)], Jq[np.ix_(top, ip)]
-        W_ac, W_pc, W_c = Jq[np.ix_(bot, ia)], Jq[np.ix_(bot, ip)], Jq[np.ix_(bot, ic)]
-        if bot.size != ic.size:
-            info["split"] = "inexact"
-            msg = (msg + "; " if msg else "") + (
-                f"{bot.size} closure rows involve the {ic.size} cut joint(s): the [7.49] "
-                "split is not square here")
-        info["rows_top"], info["rows_bottom"] = top, bot
-        W = _solve(W_p, -W_a) if W_p.size else np.zeros((0, ia.size))
-        H = Jq
-        H_a = Jq[:, ia]
-        H_p = Jq[:, ~act]
-        K = Kq
-        # twist per unit qdot_a through all joints: K_a + K_x W_x
-        J6 = Kq[:, ia] + Kq[:, ~act] @ W_x
-        T = model.pose(qa, x)
-        J_a = J6
-        row_names = tuple(np.array(f.row_names)[np.concatenate([top, bot])].tolist())
-        A = B = None
-        qp_names = tuple(names[ip].tolist())
-        qc_names = tuple(names[ic].tolist())
-    else:
-        W_a, W_p = Wa_m, Wp_m
-        W_ac = np.zeros((0, qa.size))
-        W_pc = np.zeros((0, x.size))
-        W_c = np.zeros((0, 0))
-        W = W_x
-        z = np.concatenate([qv, x])
-        _, H, K = (np.array(v) for v in f.rows_q(z))
-        nq = qv.size
-        pas = np.concatenate([~act, np.ones(x.size, bool)])
-        H_a = H[:, np.flatnonzero(act)]
-        H_p = H[:, pas]
-        Kx = np.array(f.twist_x(x))
-        J6 = Kx @ W_x  # (v, omega) of the platform frame
-        T = model.pose(qa, x)
-        J_a = J6[tw]
-        row_names = tuple(model.row_names)
+    # [7.49]: the unknowns split into the tree's passive joints and the cut joints, the
+    # rows into those that do not involve a cut joint's rate (top) and those that do
+    cut_x = np.isin(f.z_x, model.qc_index) if model.qc_index.size else np.zeros(x.size, bool)
+    Wc_cols = Wp_m[:, cut_x]
+    scale = max(1.0, float(np.abs(np.hstack([Wa_m, Wp_m])).max())) if Wp_m.size or Wa_m.size \
+        else 1.0
+    if not np.isfinite(scale):
+        scale = 1.0
+    has_c = np.any(np.abs(Wc_cols) > 1e-7 * scale, axis=1) if cut_x.any() else \
+        np.zeros(Wp_m.shape[0], bool)
+    top, bot = np.flatnonzero(~has_c), np.flatnonzero(has_c)
+    info["split"] = "rows"
+    W_a, W_p = Wa_m[top], Wp_m[np.ix_(top, np.flatnonzero(~cut_x))]
+    W_ac = Wa_m[bot]
+    W_pc = Wp_m[np.ix_(bot, np.flatnonzero(~cut_x))]
+    W_c = Wp_m[np.ix_(bot, np.flatnonzero(cut_x))]
+    if bot.size != int(cut_x.sum()):
+        info["split"] = "inexact"
+        msg = (msg + "; " if msg else "") + (
+            f"{bot.size} closure rows involve the {int(cut_x.sum())} cut joint(s): the [7.49] "
+            "split is not square here")
+    info["rows_top"], info["rows_bottom"] = top, bot
+    W = W_x if not cut_x.any() else (
+        _solve(W_p, -W_a) if W_p.size else np.zeros((0, qa.size)))
+    # Modern Robotics (7.13): the joint-level closure over every joint (and the platform)
+    z = z_of(model, qv, x)
+    _, H, K = (np.array(v) for v in f.rows_q(z, model.p))
+    pas = np.ones(f.nvar, bool)
+    pas[np.flatnonzero(act)] = False
+    H_a = H[:, ~pas]
+    H_p = H[:, pas]
+    # the end-effector twist per unit qdot_a through the unknowns: K_a + K_x W_x
+    Ka, Kx = (np.array(v) for v in f.twist(qa, x, model.p))
+    J6 = Ka + Kx @ W_x
+    T = model.pose(qa, x)
+    J_a = J6[tw]
+    rows = np.concatenate([top, bot])
+    row_names = tuple(model.row_names[i] for i in rows)
+    A = B = None
+    if platform_unknowns_only(model):
         # Chablat-Wenger: A t + B qdot_a = 0 on the leg rows (quaternion norm row dropped)
-        legrows = [i for i, n in enumerate(model.row_names) if n.startswith("leg:")]
-        E = _twist_to_xdot(mech.platform, x)
+        legrows = np.flatnonzero(model.row_leg >= 0)
+        E = model.platform.xdot_of_twist(x[: model.n_platform])
         A = Wp_m[legrows] @ E
         B = Wa_m[legrows]
-        qp_names = tuple(np.array(mech.joint_names)[~act].tolist())
-        qc_names = ()
-        info["nq"] = nq
     J_s = _spatial_from_twist(J6, T[:3, 3])
-    G = None
-    if mech.kind == "legs" and mech.platform == "spatial" and all(
-            leg.type in ("UPS", "SPS") for leg in mech.legs):
-        G = stewart_gough_statics(mech, T)
+    G = stewart_gough_statics(model, qa, T)
     if defined and not all(np.isfinite(a).all() for a in (H, K, J_a)):
         defined = info["defined"] = ok = False
         msg = "the velocity model is not finite at q (values too large?); it is undefined there"
@@ -413,34 +398,32 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
         message=msg, residual=res, W_a=W_a, W_p=W_p, W_ac=W_ac, W_pc=W_pc, W_c=W_c, W=W,
         W_x=W_x, H=H, H_a=H_a, H_p=H_p, J_a=J_a, J_s=J_s, K=K, A=A, B=B, G_statics=G,
         twist_names=tuple(TWIST_NAMES[i] for i in tw), row_names=row_names,
-        var_names=f.var_names, qa_names=tuple(mech.active_names), qp_names=qp_names,
-        qc_names=qc_names, x_names=tuple(model.x_names), info=info,
+        var_names=f.var_names, qa_names=tuple(mech.active_names),
+        qp_names=tuple(mech.passive_names), qc_names=tuple(mech.cut_names),
+        x_names=tuple(model.x_names), info=info,
     )
 
 
-def _twist_to_xdot(platform: str, x: np.ndarray) -> np.ndarray:
-    """E(x): x_dot = E t for the platform twist t (rows of ``twist_rows``)."""
-    if platform == "spatial":
-        E = np.zeros((7, 6))
-        E[:3, :3] = np.eye(3)
-        E[3:, 3:] = 0.5 * _quat_rate_matrix(x[3:7])
-        return E
-    n = {"planar": 3, "planar_point": 2, "spatial_translational": 3}[platform]
-    return np.eye(n)
-
-
-def stewart_gough_statics(mech: Mechanism, T: np.ndarray) -> np.ndarray:
+def stewart_gough_statics(model: Model, qa: np.ndarray, T: np.ndarray) -> np.ndarray | None:
     """The inverse Jacobian of a Stewart-Gough platform by statics (MR 7.2.1).
 
     Row i is (-n_i x q_i, n_i)^T, with n_i the unit vector along leg i (from the base joint
     q_i to the platform joint) and q_i the base joint centre, so that qdot_a = G V_s for
-    the spatial twist V_s = (omega_s, v_s) (J_s^-1 of MR).
+    the spatial twist V_s = (omega_s, v_s) (J_s^-1 of MR). Defined for spatial platforms
+    that turn, whose legs are all distances actuated in length (the model's distance form
+    with fixed centres); None otherwise.
     """
+    plat = model.platform
+    if plat is None or not plat.rotates or plat.space_dim != 3:
+        return None
+    df = model.distance_form()
+    if df is None or not np.all(df.length_actuated):
+        return None
+    C, _ = df.centres_radii(qa)
     R, p = T[:3, :3], T[:3, 3]
     rows = []
-    for leg in mech.legs:
-        qi = np.asarray(leg.base, dtype=float)
-        Pi = p + R @ np.asarray(leg.platform, dtype=float)
+    for qi, b in zip(C[0], df.platform_points):
+        Pi = p + R @ b
         d = float(np.linalg.norm(Pi - qi))
         n = (Pi - qi) / d if d > 0 else np.full(3, np.nan)  # a leg of zero length: undefined
         rows.append(np.concatenate([-np.cross(n, qi), n]))
@@ -457,17 +440,17 @@ def _rates(name: str, v: Any, names: Any) -> np.ndarray:
             f"{_show(v)}", path=(name,)) from None
 
 
-def _undefined_message(mech: Mechanism, model: Any, phi: np.ndarray, Wp: np.ndarray,
-                       Wa: np.ndarray) -> str:
+def _undefined_message(model: Model, phi: np.ndarray, Wp: np.ndarray, Wa: np.ndarray) -> str:
     """Why the model rows or their Jacobian are not finite at a configuration."""
     bad = ~(np.isfinite(phi.ravel()) & np.isfinite(Wp).all(axis=1) & np.isfinite(Wa).all(axis=1))
     rows = [model.row_names[i] for i in np.flatnonzero(bad)]
     if not np.isfinite(phi).all():
         return (f"the model overflows at q (the closure rows {rows} are not finite): the joint "
                 "values are far beyond the mechanism's size; give a closed configuration")
-    legs = [r.split(":")[1] for r in rows if r.startswith("leg:")]
-    if legs and mech.kind == "legs":
-        which = ", ".join(f"leg {k} ({mech.legs[int(k) - 1].type})" for k in legs)
+    legs = sorted({int(model.row_leg[i]) for i in np.flatnonzero(bad) if model.row_leg[i] >= 0})
+    if legs:
+        labels = leg_labels(model)
+        which = ", ".join(f"leg {k + 1} ({labels[k]})" for k in legs)
         return (f"the velocity model is undefined at q: {which} has zero length there (its "
                 "platform point is on its base point), so its direction is undefined; give a "
                 "configuration with every leg of positive length")
