@@ -45,7 +45,7 @@ with :func:`leg_type`. The problem-file schema reads this registry.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -121,12 +121,13 @@ class Distance:
     length: float | None
 
 
-@dataclass(frozen=True, eq=False)
 class Leg:
     """One leg: a serial chain from the base to the platform (see the module docstring).
 
-    Build one with a type builder (``Leg.from_spec({"type": "UPS", ...})``, or through
-    :meth:`optkin.Mechanism.from_legs`) or from its screws with :meth:`from_screws`.
+    Build one by its type, ``Leg("UPS", base, platform)`` (keys of the type as keyword
+    arguments: ``lengths``, ``axis``, ``arm``, ``direction``; checked when the mechanism is
+    built, or by :meth:`from_spec`), or from its screws with :meth:`from_screws`. Legs are
+    immutable.
 
     Attributes
     ----------
@@ -164,26 +165,31 @@ class Leg:
         Variables that must stay positive (a leg's length between its joints).
     """
 
-    type: str
-    joints: str
-    screws: np.ndarray
-    names: tuple[str, ...]
-    actuated: tuple[int, ...]
-    home: np.ndarray
-    end: str
-    platform_point: np.ndarray
-    dim: int
-    end_joint: str = ""
-    reported: bool = False
-    distance: Distance | None = None
-    base: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    platform: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    lengths: tuple[float, ...] = ()
-    axis: np.ndarray | None = None
-    arm: np.ndarray | None = None
-    inventory: tuple[tuple[int, ...], int, int] = ((), 0, 0)
-    positive: tuple[int, ...] = ()
-    spec: Mapping[str, Any] = field(default_factory=dict)
+    __slots__ = ("type", "joints", "screws", "names", "actuated", "home", "end", "platform_point",
+                 "dim", "end_joint", "reported", "distance", "base", "platform", "lengths", "axis",
+                 "arm", "inventory", "positive", "spec")
+
+    def __init__(self, type: str, base: Any = None, platform: Any = None, lengths: Any = (),
+                 axis: Any = None, arm: Any = None, actuated: Any = None, **keys: Any) -> None:
+        spec: dict[str, Any] = {"type": type, "base": _plain(base), "platform": _plain(platform)}
+        for k, v in (("lengths", lengths), ("axis", axis), ("arm", arm), ("actuated", actuated),
+                     *keys.items()):
+            if not _empty(v):
+                spec[k] = _plain(v)
+        _init(self, type=type, joints="", screws=np.zeros((0, 6)), names=(), actuated=(),
+              home=np.eye(4), end="", platform_point=np.zeros(3), dim=0, spec=spec)
+
+    @classmethod
+    def _chain(cls, **fields: Any) -> Leg:
+        leg = object.__new__(cls)
+        _init(leg, **fields)
+        return leg
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError("a Leg is immutable; build a new one")
+
+    def __repr__(self) -> str:
+        return f"Leg({self.type!r}, joints={self.joints!r}, end={self.end!r})"
 
     # ------------------------------------------------------------------ structure
     @property
@@ -233,8 +239,7 @@ class Leg:
     def to_dict(self) -> dict[str, Any]:
         """The leg's description (the builder's arguments, or the screws)."""
         if self.spec:
-            return {k: (np.asarray(v).tolist() if isinstance(v, np.ndarray) else v)
-                    for k, v in self.spec.items()}
+            return {k: _plain(v) for k, v in self.spec.items() if v is not None}
         return {"screws": self.screws.tolist(), "home": self.home.tolist(),
                 "actuated": list(self.actuated), "joints": self.joints}
 
@@ -297,7 +302,7 @@ class Leg:
         label = _label(name if name is not None else joints)
         planar = _is_planar(S, T)
         dim = 2 if planar else 3
-        return cls(type=label, joints=joints, screws=_frozen(S), names=tuple(names),
+        return cls._chain(type=label, joints=joints, screws=_frozen(S), names=tuple(names),
                    actuated=act, home=_frozen(T), end="frame", platform_point=_frozen(np.zeros(3)),
                    dim=dim, inventory=(tuple(n_vars(c) for c in joints), len(joints) - 1, 0))
 
@@ -306,9 +311,9 @@ class Leg:
         """Build and validate leg ``i`` (0-based) from a mapping ``{"type": ..., ...}``
         (one of :data:`LEG_TYPES`) or ``{"screws": ..., "home": ..., "actuated": ...}``."""
         if isinstance(spec, Leg):
-            if not spec.spec:
+            if not spec.spec:  # a chain (from screws): already valid
                 return spec
-            spec = spec.spec
+            spec = spec.spec  # a leg given by its type: built and checked here
         where = f"legs[{i}]"
         if not isinstance(spec, Mapping):
             raise MechanismError(f"{where}: expected a mapping with type, base, platform "
@@ -377,6 +382,30 @@ class Leg:
                               for k, v in args.items()}}
         object.__setattr__(leg, "spec", keep)
         return leg
+
+
+_DEFAULTS: dict[str, Any] = {"end_joint": "", "reported": False, "distance": None,
+                             "lengths": (), "axis": None, "arm": None,
+                             "inventory": ((), 0, 0), "positive": (), "spec": {}}
+
+
+def _init(leg: Leg, **fields: Any) -> None:
+    for k in Leg.__slots__:
+        v = fields[k] if k in fields else _DEFAULTS.get(k)
+        if k in ("base", "platform") and v is None:
+            v = _frozen(np.zeros(0))
+        object.__setattr__(leg, k, v)
+
+
+def _plain(v: Any) -> Any:
+    """A spec value as plain data (lists of numbers), for echoing and rebuilding."""
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
 
 
 # --------------------------------------------------------------------------------------
@@ -533,7 +562,7 @@ def _point_leg(type_: str, joints: str, screws: list, names: Sequence[str], actu
     freedoms = tuple(n_vars(c) for c in joints)
     if not reported:
         freedoms += (n_vars(end_joint) if dim == 3 else 1,)
-    return Leg(type=type_, joints=joints, screws=_frozen(np.array(screws)), names=tuple(names),
+    return Leg._chain(type=type_, joints=joints, screws=_frozen(np.array(screws)), names=tuple(names),
                actuated=(actuated,), home=_frozen(home), end="point",
                platform_point=_frozen(_pad3(b)), dim=dim, end_joint=end_joint,
                reported=reported, distance=distance,
@@ -660,7 +689,7 @@ def _rps_leg(base, platform, axis) -> Leg:
     A = _pad3(base)
     v = np.cross(ax, _X) if abs(ax @ _Z) > 0.9 else _Z - ax * (ax @ _Z)
     v = v / np.linalg.norm(v)  # the leg's direction at home: normal to the axis
-    f1 = np.cross(v, ax)       # the spherical's axes: (f1, ax, v), orthonormal
+    f1 = np.cross(ax, v)       # the spherical's axes: (f1, ax, v), right-handed
     S = [revolute_screw(ax, A), prismatic_screw(v), revolute_screw(f1, A),
          revolute_screw(ax, A), revolute_screw(v, A)]
     leg = _point_leg("RPS", "RPS", S, ("theta", "rho", "sa", "sb", "sc"), 1, A, platform, 3,
@@ -684,7 +713,7 @@ def _prs_leg(base, platform, direction, axis, lengths) -> Leg:
         raise MechanismError("axis: the revolute axis must not be along the slider",
                              path=("axis",))
     v = v / np.linalg.norm(v)
-    f1 = np.cross(v, ax)
+    f1 = np.cross(ax, v)  # (f1, ax, v) right-handed
     E = A + l * v
     S = [prismatic_screw(u), revolute_screw(ax, A), revolute_screw(f1, E),
          revolute_screw(ax, E), revolute_screw(v, E)]
@@ -711,7 +740,7 @@ def _upu_leg(base, platform, axis, arm) -> Leg:
          revolute_screw(a2, A), revolute_screw(a1, A)]
     home = np.eye(4)
     home[:3, 3] = A - b  # the platform frame at home: its point b at A
-    return Leg(type="UPU", joints="UPU", screws=_frozen(np.array(S)),
+    return Leg._chain(type="UPU", joints="UPU", screws=_frozen(np.array(S)),
                names=("ua", "ub", "rho", "va", "vb"), actuated=(2,), home=_frozen(home),
                end="frame", platform_point=_frozen(b), dim=3, inventory=((2, 1, 2), 2, 0),
                positive=(2,), **_geo(base, platform, axis=_frozen(a1), arm=_frozen(a2)))
@@ -730,7 +759,7 @@ def _psp_leg(base, platform, direction, axis) -> Leg:
          revolute_screw(_Z, A), prismatic_screw(w)]
     home = np.eye(4)
     home[:3, 3] = A - b
-    return Leg(type="PSP", joints="PSP", screws=_frozen(np.array(S)),
+    return Leg._chain(type="PSP", joints="PSP", screws=_frozen(np.array(S)),
                names=("s", "sa", "sb", "sc", "t"), actuated=(0,), home=_frozen(home),
                end="frame", platform_point=_frozen(b), dim=3, inventory=((1, 3, 1), 2, 0),
                **_geo(base, platform, axis=_frozen(w), arm=_frozen(u)))

@@ -96,12 +96,16 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
         if isinstance(part, ClosedPart):
             QA, Q, V = (np.array(v) for v in part.fn(xplat, model.p))
             sols = []
+            rev = np.array(mech.revolute, dtype=bool)[part.q]
             for b in range(part.branches):
                 if V[b, 0] < 0.5 or not np.all(np.isfinite(Q[b])):
                     continue
-                if any(np.allclose(Q[b], s_, rtol=0, atol=1e-12) for s_ in sols):
-                    continue  # the two branches coincide (the leg is stretched)
-                sols.append(Q[b].copy())
+                qb = np.where(rev, wrap_angle(Q[b]), Q[b])
+                # the two branches of a stretched leg meet (a double root: sqrt(eps) apart)
+                if any(np.max(np.abs(np.where(rev, wrap_angle(qb - s_), (qb - s_) / model.length)))
+                       < 1e-7 for s_ in sols):
+                    continue
+                sols.append(qb)
             if not sols:
                 leg = mech.legs[part.leg]
                 return SolutionSet([], "postures", {
@@ -205,7 +209,8 @@ def _search(model: Model, part: SearchPart, T: np.ndarray, xplat: np.ndarray | N
     cands: list[np.ndarray] = []
     first = part.stages[0]
     idx1 = np.array(first.idx, dtype=int)
-    Z1, r1 = _multistart(model, first.step, pose, lo[idx1], hi[idx1], n, iters, seed, deadline)
+    Z1, r1 = _multistart(model, first.step, pose, lo[idx1], hi[idx1], n, iters, seed, deadline,
+                         scale[idx1])
     runs += n
     Z1 = Z1[:, np.flatnonzero(r1 <= 1e3 * tol)]
     Z1[angle[idx1]] = wrap_angle(Z1[angle[idx1]])
@@ -221,7 +226,7 @@ def _search(model: Model, part: SearchPart, T: np.ndarray, xplat: np.ndarray | N
             z1 = Z1[:, j]
             n2 = max(32, n // 4)
             Z2, r2 = _multistart(model, second.step, z1, lo[idx2], hi[idx2], n2, iters,
-                                 seed + 1, deadline)
+                                 seed + 1, deadline, scale[idx2])
             runs += n2
             for i in np.flatnonzero(r2 <= 1e3 * tol):
                 cands.append(np.concatenate([z1, Z2[:, i]]))
@@ -246,7 +251,7 @@ def _search(model: Model, part: SearchPart, T: np.ndarray, xplat: np.ndarray | N
 
 
 def _multistart(model: Model, step, param: np.ndarray, lo, hi, n: int, iters: int, seed: int,
-                deadline: Deadline | None = None):
+                deadline: Deadline | None = None, scale: np.ndarray | None = None):
     """Batched Newton from n Sobol starts in the box [lo, hi]; returns (Z, residuals).
 
     The iterations stop early when ``deadline`` expires (the residuals say what converged).
@@ -255,15 +260,19 @@ def _multistart(model: Model, step, param: np.ndarray, lo, hi, n: int, iters: in
     U = qmc.Sobol(dim, scramble=True, seed=seed).random(n)
     Z = (lo + U * (hi - lo)).T
     fmap = model.cached(("inverse_map", step.name(), n, step.is_a("External")),
-                        lambda: step.map(f"{step.name()}_{n}", "thread", n, [1, 2], []))
+                        lambda: step.map(f"{step.name()}_{n}", "serial", n, [1, 2], []))
     param = np.asarray(param, dtype=float).reshape(-1, 1)
+    sc = (np.ones(dim) if scale is None else np.asarray(scale, dtype=float))[:, None]
     for _ in range(iters):
         if deadline is not None and deadline.expired():
             break
         Zn, _ = fmap(Z, param, model.p)
         Zn = np.array(Zn)
         good = np.all(np.isfinite(Zn), axis=0)
+        moved = np.abs(Zn[:, good] - Z[:, good]) / sc
         Z[:, good] = Zn[:, good]
+        if not moved.size or float(moved.max()) < 1e-13:  # every start has settled
+            break
     _, r = fmap(Z, param, model.p)
     return Z, np.array(r).ravel()
 
