@@ -184,12 +184,29 @@ def _from_khalil(data):
 @st.composite
 def legs(draw):
     platform = draw(st.one_of(st.sampled_from(sorted(PLATFORMS)), scalar))
-    dim = PLATFORMS[platform][0] if isinstance(platform, str) and platform in PLATFORMS else 2
+    dim = PLATFORMS[platform].space_dim if isinstance(platform, str) and platform in PLATFORMS \
+        else 2
     n = draw(st.integers(0, 7))
     out = []
     for _ in range(n):
+        if draw(st.integers(0, 5)) == 0:  # a chain given by its screws (Leg.from_screws)
+            k = draw(st.integers(1, 6))
+            leg = {"screws": draw(st.one_of(matrices(k, 6, -1.0, 1.0), st.sampled_from(
+                       [[[0, 0, 1, 0, -1, 0], [0, 0, 0, 1, 0, 0], [0, 0, 1, 0, -1, 0]]]))),
+                   "home": draw(st.one_of(st.just(np.eye(4).tolist()), matrices(4, 4))),
+                   "actuated": draw(st.one_of(st.integers(-1, 6), st.lists(
+                       st.integers(0, 6), max_size=3), scalar))}
+            if draw(st.booleans()):
+                leg["joints"] = draw(st.one_of(st.sampled_from(["RPR", "UPU", "C", "S"]),
+                                               scalar))
+            out.append(leg)
+            continue
         leg = {"type": draw(st.one_of(st.sampled_from(sorted(LEG_TYPES)), scalar)),
                "base": draw(vectors(dim)), "platform": draw(vectors(dim, -0.5, 0.5))}
+        lt = LEG_TYPES.get(leg["type"]) if isinstance(leg["type"], str) else None
+        if lt is not None and draw(st.booleans()):  # the keys its type takes, as many numbers
+            for key, count in lt.keys.items():
+                leg[key] = draw(vectors(count, 0.1, 2.0))
         if draw(st.booleans()):
             leg["lengths"] = draw(vectors(2, 0.1, 2.0))
         if draw(st.booleans()):

@@ -342,6 +342,49 @@ def test_khalil_legs_and_library_forms_build() -> None:
         assert mech.dof == len(mech.active_names)
 
 
+def test_legs_read_the_registries_and_screws() -> None:
+    """The schema takes every registered leg type with its keys, a leg by its screws
+    (Leg.from_screws) mixed with typed legs, and the platform kind from the legs."""
+    from optkin.mechanism.legs import LEG_TYPES
+
+    legs = copy.deepcopy(RPR_LEGS["mechanism"]["legs"])
+    # the third RPR leg by its screws (revolutes about z through (0, 3), slide along x)
+    legs[2] = {"screws": [[0, 0, 1, 3.0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 1, 3.0, 0, 0]],
+               "home": [[1, 0, 0, 0.0], [0, 1, 0, 2.6], [0, 0, 1, 0], [0, 0, 0, 1]],
+               "actuated": 1, "joints": "RPR"}
+    doc = mutate(RPR_LEGS, "mechanism.legs", legs)
+    mech = check_problem(validate_document(doc, "s.toml"), "s.toml")
+    ref = check_problem(validate_document(RPR_LEGS, "r.toml"), "r.toml")
+    qa = [abs(x) for x in optkin.inverse(mech, [1.6, 1.2, 0.3])[0].qa]
+    assert qa == pytest.approx(list(optkin.inverse(ref, [1.6, 1.2, 0.3])[0].qa), abs=1e-10)
+    # the platform kind follows from the legs when left out
+    no_plat = copy.deepcopy(RPR_LEGS)
+    del no_plat["mechanism"]["platform"]
+    assert check_problem(validate_document(no_plat, "p.toml"), "p.toml").platform == "planar"
+    # a type the library registered is accepted with its keys and counts
+    prr = dict(RPR_LEGS["mechanism"]["legs"][2], type="PRR", direction=[1.0, 0.0],
+               lengths=[1.0])
+    assert "PRR" in LEG_TYPES
+    doc = mutate(RPR_LEGS, "mechanism.legs.2", prr)
+    mech = check_problem(validate_document(doc, "prr.toml"), "prr.toml")
+    assert mech.active_names[2] == "L3.s"
+    for path, value, msg in (
+            ("mechanism.legs.2.direction", [1.0, 0.0, 0.0],
+             r"legs\[2\]\.direction: expected 2 numbers \(the slider's unit direction\), got 3"),
+            ("mechanism.legs.2.axis", [0.0, 0.0, 1.0], r"legs\[2\]\.axis: unknown key for a PRR leg"),
+            ("mechanism.legs.2.screws", [[0, 0, 0, 1, 0, 0]],
+             r"legs\[2\]\.type: unknown key for a leg given by its screws")):
+        with pytest.raises(ProblemFileError, match=msg):
+            check_problem(validate_document(mutate(doc, path, value), "bad.toml"), "bad.toml")
+    bad = mutate(RPR_LEGS, "mechanism.legs.2", dict(legs[2], screws=[[0, 0, 2, 0, 0, 0]] * 3))
+    with pytest.raises(ProblemFileError, match=r"legs\[2\]\.screws\[0\]: the rotation axis omega "
+                                               r"must be a unit vector"):
+        check_problem(validate_document(bad, "bad.toml"), "bad.toml")
+    bad = mutate(RPR_LEGS, "mechanism.legs.2", {k: v for k, v in legs[2].items() if k != "home"})
+    with pytest.raises(ProblemFileError, match=r"legs\[2\]\.home: missing required key"):
+        check_problem(validate_document(bad, "bad.toml"), "bad.toml")
+
+
 def test_joint_vector_by_name_and_guess() -> None:
     doc = mutate(SR400, "task.0.qa", {"theta1": 0.3, "theta2": -0.4, "theta4": 0.5,
                                       "theta5": 0.7, "theta6": -0.2, "theta7": 0.6})

@@ -570,6 +570,32 @@ def test_static_model_consistent_with_optkin_jacobians():
                                atol=1e-10)
 
 
+@pytest.mark.parametrize("which", ["rpr3", "stewart_gough", "delta"])
+def test_chain_form_gives_the_reduced_form_static_map(which):
+    """Legs in their chain form (reduced=False) take the augmented static model (task rows
+    over the joint-level closure); it gives the map of the reduced A/B form."""
+    if which == "rpr3":
+        ref, pose = optkin.mechanisms.rpr3(BASE3, PLAT3), [1.6, 1.2, 0.3]
+    elif which == "stewart_gough":
+        ang = np.deg2rad([0, 60, 120, 180, 240, 300]) + np.deg2rad([-10, 10] * 3)
+        base = np.column_stack([np.cos(ang), np.sin(ang), np.zeros(6)])
+        pang = np.deg2rad([0, 60, 120, 180, 240, 300]) + np.deg2rad([25, -25] * 3)
+        plat = 0.5 * np.column_stack([np.cos(pang), np.sin(pang), np.zeros(6)])
+        ref, pose = optkin.mechanisms.stewart_gough(base, plat), [0.05, -0.03, 0.9, 0.1, -0.05, 0.2]
+    else:
+        ref, pose = optkin.mechanisms.delta(), [0.05, 0.02, -0.7]
+    spec = ref.to_dict()
+    chain = optkin.Mechanism.from_legs(spec["legs"], spec["platform"], reduced=False)
+    a = sol_at(ref, pose)
+    b = min(optkin.inverse(chain, pose),
+            key=lambda s: np.abs(np.angle(np.exp(1j * (s.qa - a.qa)))).max())
+    sa, sb = statics.static_model(ref, a), statics.static_model(chain, b)
+    assert sb.P.shape[1] > 0 and sa.P.shape[1] == 0
+    assert sa.singularity == sb.singularity == "none"
+    np.testing.assert_allclose(sb.G, sa.G, atol=1e-9)
+    np.testing.assert_allclose(sb.J, sa.J, atol=1e-9)
+
+
 @pytest.mark.parametrize("name", ["optkin.statics.core", "optkin.statics.model"])
 def test_statics_docstring_examples(name):
     import doctest

@@ -36,12 +36,16 @@ from pydantic import (
     Field,
     PlainValidator,
     ValidationError,
+    create_model,
     model_validator,
 )
 from pydantic_core import PydanticCustomError
 
 from optkin._checks import MAX_ABS
 from optkin.errors import MechanismError, ProblemFileError
+from optkin.mechanism.legs import LEG_TYPES as _LEG_REGISTRY
+from optkin.mechanism.legs import validate_legs
+from optkin.mechanism.platforms import PLATFORMS as _PLATFORM_REGISTRY
 from optkin.problems.workers import MAX_TIME_LIMIT
 
 if sys.version_info >= (3, 11):
@@ -484,39 +488,83 @@ class KhalilMechanism(Strict):
 
 
 # ---- mechanisms: legs ------------------------------------------------------
+#
+# The leg types, the keys each takes (with how many numbers) and the platform kinds are
+# the library's registries (optkin.mechanism.legs.LEG_TYPES, optkin.mechanism.platforms.
+# PLATFORMS): a leg type or platform kind added there is accepted here.
 
-LEG_TYPES = ("RPR", "RRR", "SPS", "UPS", "RUS", "RSS")
-_LEG_LENGTHS = {"RPR": 0, "RRR": 2, "SPS": 0, "UPS": 0, "RUS": 2, "RSS": 2}
-_PLANAR_LEGS = ("RPR", "RRR")
-_PLATFORM_DIM = {"planar": 2, "planar_point": 2, "spatial": 3, "spatial_translational": 3}
-_PLATFORM_LEGS = {"planar": 3, "planar_point": 2, "spatial": 6, "spatial_translational": 3}
+#: The keys of a leg given by its screws (``optkin.Leg.from_screws``).
+CHAIN_KEYS = ("screws", "home", "actuated", "joints", "name")
 
 
-def _index_or_name(v: Any) -> int | str:
+def _type_keys() -> tuple[str, ...]:
+    """Every key some leg type takes besides base, platform and actuated (registry order)."""
+    out: dict[str, None] = {}
+    for lt in _LEG_REGISTRY.values():
+        for k in lt.keys:
+            out.setdefault(k, None)
+    return tuple(out)
+
+
+def _index_or_name(v: Any) -> int | str | list[int]:
+    """A leg's actuated variable: its index or name (a type), or indices (screws)."""
     if isinstance(v, str):
         return v
+    if isinstance(v, list):
+        if not v:
+            raise _err("actuated", "expected an index, a name or a non-empty list of indices", v)
+        return _list_of(_nonneg_int, "indices")(v)
     return _nonneg_int(v)
 
 
-class Leg(Strict):
-    """One leg: its type, base and platform attachment points, link lengths, actuator."""
+def _screw_rows(v: Any) -> list[list[float]]:
+    """Screws: a list of rows (omega, v) of 6 numbers."""
+    return _list_of(_point(6), "screws (rows of 6 numbers)", min_n=1)(v)
 
-    type: Literal["RPR", "RRR", "SPS", "UPS", "RUS", "RSS"]
-    base: Numbers()
-    platform: Numbers()
-    lengths: Numbers(positive=True) = Field(default_factory=list)
-    axis: Numbers(3) | None = None
-    arm: Numbers(3) | None = None
-    actuated: Annotated[Any, PlainValidator(_index_or_name)] = None
+
+def _home_matrix(v: Any) -> list[list[float]]:
+    """A leg's home: the 4x4 pose of the platform frame with every joint at zero."""
+    if not (isinstance(v, list) and v and all(isinstance(r, list) for r in v)):
+        raise _err("matrix", "expected a 4x4 homogeneous matrix (4 rows of 4 numbers)", v)
+    return _rigid(_list_of(_point(4), "rows of 4 numbers", n=4)(v))
+
+
+def _leg_fields() -> dict[str, Any]:
+    """The fields of a leg table, read from the registries."""
+    fields: dict[str, Any] = {
+        "type": (Literal[tuple(_LEG_REGISTRY)] | None, None),  # type: ignore[misc]
+        "base": (Numbers() | None, None),
+        "platform": (Numbers() | None, None),
+    }
+    for k in _type_keys():
+        fields[k] = (Numbers(positive=k == "lengths") | None, None)
+    fields["actuated"] = (Annotated[Any, PlainValidator(_index_or_name)], None)
+    fields["screws"] = (Annotated[list[list[float]], PlainValidator(_screw_rows)] | None, None)
+    fields["home"] = (Annotated[list[list[float]], PlainValidator(_home_matrix)] | None, None)
+    fields["joints"] = (Str | None, None)
+    fields["name"] = (Str | None, None)
+    return fields
+
+
+Leg = create_model(
+    "Leg", __base__=Strict, __module__=__name__,
+    __doc__="One leg: a leg type (``type``, ``base``, ``platform`` and the keys the type "
+            "takes, see ``optkin.mechanism.legs.LEG_TYPES``) or a chain given by its screws "
+            "(``screws``, ``home``, ``actuated``, optional ``joints`` and ``name``; "
+            "``optkin.Leg.from_screws``).",
+    **_leg_fields(),
+)
 
 
 class LegsMechanism(Strict):
-    """A parallel robot as a platform carried by legs."""
+    """A parallel robot as a platform carried by legs. ``platform`` is one of the platform
+    kinds (``optkin.mechanism.platforms.PLATFORMS``); when left out, the kind of the legs'
+    dimension whose degrees of freedom equal the number of actuated joints."""
 
     type: Literal["legs"]
     name: Name = "legs"
-    platform: Literal["planar", "planar_point", "spatial", "spatial_translational"] = "spatial"
-    legs: Annotated[list[Leg], Field(min_length=1)]
+    platform: Literal[tuple(_PLATFORM_REGISTRY)] | None = None  # type: ignore[valid-type]
+    legs: Annotated[list[Leg], Field(min_length=1)]  # type: ignore[valid-type]
     home: Numbers() | None = None
     redundant: Bool = False
 
@@ -1277,31 +1325,149 @@ def _check_khalil(m: KhalilMechanism, fn: str) -> None:
                     f"frame {m.end_effector} does not exist (the table has frames 1..{n})")
 
 
-def _check_legs(m: LegsMechanism, fn: str) -> None:
-    dim = _PLATFORM_DIM[m.platform]
-    want = _PLATFORM_LEGS[m.platform]
-    if m.redundant and len(m.legs) < want:
-        raise _fail(fn, ["mechanism", "legs"],
-                    f"a redundantly actuated {m.platform} platform needs at least {want} legs, "
-                    f"got {len(m.legs)}")
-    if not m.redundant and len(m.legs) != want:
-        extra = "; set redundant = true for redundant actuation" if len(m.legs) > want else ""
-        raise _fail(fn, ["mechanism", "legs"],
-                    f"a {m.platform} platform needs {want} legs, got {len(m.legs)}{extra}")
+def _platform_of(m: LegsMechanism, fn: str) -> str:
+    """The platform kind: as given, else the kind of the legs' dimension whose degrees of
+    freedom equal the number of actuated joints (one kind, else the file must say)."""
+    if m.platform is not None:
+        return m.platform
+    dims = {_leg_dim(leg) for leg in m.legs}
+    n_act = sum(_n_actuated(leg) for leg in m.legs)
+    fits = [name for name, p in _PLATFORM_REGISTRY.items()
+            if p.space_dim in dims and p.dof == n_act]
+    if len(dims) != 1 or len(fits) != 1 or m.redundant:
+        raise _fail(fn, ["mechanism", "platform"],
+                    "missing required key (the platform kind, one of: "
+                    f"{', '.join(_PLATFORM_REGISTRY)}); it cannot be told from the legs")
+    return fits[0]
+
+
+def _leg_dim(leg: Any) -> int | None:
+    if leg.type is not None:
+        return _LEG_REGISTRY[leg.type].dim
+    return None  # a chain: its dimension follows from its screws
+
+
+def _n_actuated(leg: Any) -> int:
+    """How many actuated joints a leg table declares (a type: one)."""
+    if leg.screws is not None and isinstance(leg.actuated, list):
+        return len(leg.actuated)
+    return 1
+
+
+def _given(leg: Any, keys: Sequence[str]) -> list[str]:
+    return [k for k in keys if getattr(leg, k) is not None]
+
+
+def _check_chain_leg(leg: Any, loc: list[Any]) -> list[str]:
+    """A leg given by its screws: only the chain's keys; home and actuated present."""
+    other = _given(leg, [k for k in type(leg).model_fields if k not in CHAIN_KEYS])
+    if other:
+        return [loc + [other[0]], f"unknown key for a leg given by its screws; it takes "
+                f"{', '.join(CHAIN_KEYS)} (or give a leg type instead of screws)"]
+    for key in ("home", "actuated"):
+        if getattr(leg, key) is None:
+            return [loc + [key], "missing required key (a leg given by its screws needs "
+                    "screws, home and actuated)"]
+    return []
+
+
+def _check_type_leg(leg: Any, dim: int, platform: str, loc: list[Any]) -> list[Any]:
+    """A leg of a registered type: fits the platform, takes the type's keys with as many
+    numbers as the type says ("lengths": the link lengths, possibly none)."""
+    if leg.type is None:
+        return [loc + ["type"], f"missing required key (a leg type, one of: "
+                f"{', '.join(_LEG_REGISTRY)}; or the leg's screws, home and actuated)"]
+    lt = _LEG_REGISTRY[leg.type]
+    if lt.dim != dim:
+        return [loc + ["type"], f"a {leg.type} leg does not fit a {platform} platform"]
+    chain = _given(leg, [k for k in CHAIN_KEYS if k != "actuated"])
+    if chain:
+        return [loc + [chain[0]], f"unknown key for a {leg.type} leg (a leg type takes "
+                f"type, base, platform, actuated{''.join(', ' + k for k in lt.keys)}; "
+                "screws, home, joints and name describe a leg without a type)"]
+    for key in ("base", "platform"):
+        pts = getattr(leg, key)
+        if pts is None:
+            return [loc + [key], f"missing required key (the joint centre, {dim} numbers)"]
+        if len(pts) != dim:
+            return [loc + [key], f"expected {dim} numbers, got {len(pts)}"]
+    # the keys other than the link lengths tell the types apart
+    given = set(_given(leg, [k for k in _type_keys() if k != "lengths"]))
+
+    def fits(t: Any) -> bool:
+        need = {k for k in t.keys if k != "lengths" and k not in t.optional}
+        return t.dim == dim and need <= given <= set(t.keys)
+
+    if not fits(lt):
+        extra = sorted(given - set(lt.keys))
+        if extra:
+            return [loc + [extra[0]], f"unknown key for a {leg.type} leg; it takes type, base, "
+                    f"platform, actuated{''.join(', ' + k for k in lt.keys)}"]
+        need = [k for k in lt.keys if k != "lengths" and k not in lt.optional
+                and k not in given]
+        what = " and ".join(f"{k} ({lt.doc.get(k, str(lt.keys[k]) + ' numbers')})"
+                            for k in need)
+        others = [n for n, t in _LEG_REGISTRY.items() if fits(t)]
+        if others:
+            keys = ", ".join(["base", "platform", *sorted(given), "lengths"])
+            return [loc + ["type"], f"expected {' or '.join(repr(o) for o in others)} (the "
+                    f"leg types that take {keys}), got {leg.type!r}, which also needs {what}"]
+        return [loc + [need[0]], f"missing required key: a {leg.type} leg needs {what}"]
+    nl = lt.keys.get("lengths", 0)
+    got = len(leg.lengths or [])
+    if got != nl:
+        return [loc + ["lengths"], f"a {leg.type} leg has {nl} link length(s), got {got}"]
+    for key, n in lt.keys.items():
+        v = getattr(leg, key)
+        if key != "lengths" and v is not None and len(v) != n:
+            return [loc + [key], f"expected {n} numbers ({lt.doc.get(key, key)}), got {len(v)}"]
+    return []
+
+
+def _check_legs(m: LegsMechanism, fn: str) -> str:
+    """Each leg against the registries, then the number of actuated joints against the
+    platform's degrees of freedom; returns the platform kind."""
+    platform = _platform_of(m, fn)
+    plat = _PLATFORM_REGISTRY[platform]
+    dim = plat.space_dim
     for i, leg in enumerate(m.legs):
-        base = ["mechanism", "legs", i]
-        planar_leg = leg.type in _PLANAR_LEGS
-        if planar_leg != (dim == 2):
-            raise _fail(fn, base + ["type"],
-                        f"a {leg.type} leg does not fit a {m.platform} platform")
-        for key in ("base", "platform"):
-            pts = getattr(leg, key)
-            if len(pts) != dim:
-                raise _fail(fn, base + [key], f"expected {dim} numbers, got {len(pts)}")
-        nl = _LEG_LENGTHS[leg.type]
-        if len(leg.lengths) != nl:
-            raise _fail(fn, base + ["lengths"],
-                        f"a {leg.type} leg has {nl} link length(s), got {len(leg.lengths)}")
+        loc = ["mechanism", "legs", i]
+        if leg.screws is not None:
+            bad = _check_chain_leg(leg, loc)
+        else:
+            bad = _check_type_leg(leg, dim, platform, loc)
+        if bad:
+            raise _fail(fn, bad[0], bad[1])
+    n_act = sum(_n_actuated(leg) for leg in m.legs)
+    dof = plat.dof
+    if (n_act > dof) if m.redundant else (n_act == dof):
+        return platform
+    # legs that reach the platform frame may have fewer actuated joints than the
+    # platform's freedoms (their chains constrain it): the library decides
+    try:
+        validate_legs([_leg_spec(leg) for leg in m.legs], platform, redundant=m.redundant)
+    except MechanismError as e:
+        if tuple(getattr(e, "path", ())) != ("legs",):
+            raise
+        one = all(_n_actuated(leg) == 1 for leg in m.legs)
+        what, got = ("legs", len(m.legs)) if one else ("actuated joints", n_act)
+        if m.redundant:
+            raise _fail(fn, ["mechanism", "legs"],
+                        f"a redundantly actuated {platform} platform needs more than {dof} "
+                        f"{'actuated legs' if one else what}, got {got}") from None
+        extra = "; set redundant = true for redundant actuation" if n_act > dof else ""
+        raise _fail(fn, ["mechanism", "legs"],
+                    f"a {platform} platform needs {dof} {what}, got {got}{extra}") from None
+    return platform
+
+
+def _leg_spec(leg: Any) -> dict[str, Any]:
+    """The mapping ``optkin.Leg.from_spec`` takes (keys the leg left out omitted)."""
+    d = leg.model_dump(exclude_none=True)
+    if leg.type is not None and "lengths" not in _LEG_REGISTRY[leg.type].keys \
+            and not d.get("lengths", [0]):
+        del d["lengths"]  # an empty list of link lengths for a type without any
+    return d
 
 
 _ROW_IN_MESSAGE = re.compile(r"^row (\d+) \(frame j=\d+\)(?:, column (\w+))?:\s*(.*)$", re.S)
@@ -1321,7 +1487,10 @@ def _mechanism_error(e: Exception, spec: ProblemFile, fn: str) -> ProblemFileErr
     if path:  # the library says where: keep only the explanation from its message
         r = _ROW_IN_MESSAGE.match(msg)
         text = r.group(3) if r else msg
-        return ProblemFileError(f"{fn}: {prefix}.{format_key_path(path)}: {text}")
+        where = format_key_path(path)
+        if text.startswith(where + ": "):  # the library's message names the path too
+            text = text[len(where) + 2:]
+        return ProblemFileError(f"{fn}: {prefix}.{where}: {text}")
     r = _ROW_IN_MESSAGE.match(msg)
     if r:
         path = f"rows[{int(r.group(1)) - 1}]" + (f".{r.group(2)}" if r.group(2) else "")
@@ -1376,12 +1545,12 @@ def build_mechanism(spec: ProblemFile, filename: str = "<problem>") -> Any:
                     kw[key] = getattr(m, key)
             return optkin.Mechanism.from_khalil(rows, **kw)
         if isinstance(m, LegsMechanism):
-            _check_legs(m, filename)
-            legs = [leg.model_dump(exclude_none=True) for leg in m.legs]
+            platform = _check_legs(m, filename)
+            legs = [_leg_spec(leg) for leg in m.legs]
             kw: dict[str, Any] = {"home": m.home} if m.home is not None else {}
             if m.redundant:
                 kw["redundant"] = True
-            return optkin.Mechanism.from_legs(legs, platform=m.platform, name=m.name, **kw)
+            return optkin.Mechanism.from_legs(legs, platform=platform, name=m.name, **kw)
     except ProblemFileError:
         raise
     except MechanismError as e:

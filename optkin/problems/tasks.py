@@ -176,19 +176,25 @@ def _vector(v: Any, names: Sequence[str], fill: Sequence[float] | None = None) -
 
 def _home_q(mech: Any) -> list[float]:
     """All joint values at the mechanism's home configuration (where a guess table that
-    names only some joints takes the others from)."""
-    home = getattr(mech, "home", None)
-    names = list(mech.joint_names)
-    if home is not None and len(home) == len(names):
-        return [float(x) for x in home]
-    try:  # a platform's home is its task coordinates: the first posture there
+    names only some joints takes the others from): the home joint values a description
+    gives, else the first posture at its home pose, else zeros."""
+    from optkin.model import get_model
+    from optkin.model.home import home_joints, home_task
+
+    try:
         with computing():
-            sols = library_function("inverse", "inverse")(mech, np.asarray(home, dtype=float))
-        if len(sols):
-            return [float(x) for x in sols[0].q]
+            model = get_model(mech)
+            q = home_joints(model)
+            if q is not None:
+                return [float(x) for x in q]
+            pose = home_task(model)
+            if pose is not None:
+                sols = library_function("inverse", "inverse")(mech, pose)
+                if len(sols):
+                    return [float(x) for x in sols[0].q]
     except Exception:  # noqa: BLE001 - fall back to zeros below
         pass
-    return [0.0] * len(names)
+    return [0.0] * len(mech.joint_names)
 
 
 def _guess(mech: Any, v: Any) -> Any:

@@ -20,6 +20,9 @@ from .._dryrun import checkpoint, computing
 from ..errors import NumericError, StaticsError
 from ..limits import Deadline
 from ..mechanism import Mechanism
+from ..model import get_model
+from ..model import statics as ms
+from ..model.home import home_task
 from ..results import SolverStats
 from ..solvers.common import merge_options
 from . import problems as pb
@@ -902,11 +905,10 @@ def wrench_feasible_workspace(
         g = [as_int(v, "grid", lo=2, hi=MAX_GRID, error=StaticsError, path=("grid",))
              for v in gl] * (3 - len(gl))
         if bounds is None:
-            if mech.kind != "legs":
+            bounds = ms.base_box(get_model(mech))
+            if bounds is None:
                 raise StaticsError("bounds: required for a Khalil mechanism ([[lo, hi], [lo, hi]])",
                                    path=("bounds",))
-            pts = np.array([leg.base[:2] for leg in mech.legs])
-            bounds = np.column_stack([pts.min(axis=0), pts.max(axis=0)])
         try:
             b = as_matrix(_float_array(bounds), "bounds", (2, 2), error=StaticsError)
         except StaticsError:
@@ -915,7 +917,9 @@ def wrench_feasible_workspace(
             raise StaticsError(f"bounds: expected [[lo, hi], [lo, hi]] with lo < hi, finite, got "
                                f"{show(bounds)}", path=("bounds",))
         if fixed is None:
-            fixed = mech.home if (mech.kind == "legs" and mech.home is not None) else np.zeros(td)
+            fixed = home_task(get_model(mech))
+            if fixed is None:
+                fixed = np.zeros(td)
         try:
             f = as_vector(_ravel(fixed), "fixed", td, error=StaticsError)
         except StaticsError:

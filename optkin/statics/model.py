@@ -9,16 +9,20 @@ Every mechanism is written at a configuration as one linear velocity constraint
 between the end-effector twist ``t``, the actuated joint rates ``qa_dot`` and the rates of
 the remaining unknowns ``qp_dot`` (passive and cut joints):
 
-* leg-described platforms: the closure f_i(x, q_a,i) = |P_i(x) - C_i(q_a,i)| - l_i = 0
-  differentiates to Chablat and Wenger's A t + B qa_dot = 0 (seed 004), with A = W_p written
-  in twist coordinates and B = W_a diagonal; P is empty (the passive leg joints were
-  eliminated leg by leg). Planar platforms: x = (x, y, phi) so t = (vx, vy, wz) = x_dot.
-  Spatial platforms: x = (p, quaternion), and the quaternion rate of a base-frame angular
-  velocity w is quat_dot = 1/2 (0, w) * quat, so A = W_p [I 0; 0 1/2 E(quat)] (the row of
-  the quaternion norm vanishes on these motions and is dropped).
-* Khalil tables (seed 000, 7.5-7.7): the task rows t - J_a qa_dot - J_x x_dot = 0 (J the
-  twist Jacobian of the end-effector frame) stacked over the closure W_a qa_dot + W_p x_dot
-  = 0 [7.49], i.e. A = [I; 0], B = [-J_a; W_a], P = [-J_x; W_p].
+* fully parallel platforms (one distance row and one actuator per leg, see
+  :attr:`optkin.model.Model.fully_parallel`): the closure f_i(x, q_a,i) = |P_i(x) -
+  C_i(q_a,i)| - l_i = 0 differentiates to Chablat and Wenger's A t + B qa_dot = 0 (seed
+  004), with A = W_p written in twist coordinates and B = W_a diagonal; P is empty (the
+  passive leg joints were eliminated leg by leg). Planar platforms: x = (x, y, phi) so
+  t = (vx, vy, wz) = x_dot. Spatial platforms: x = (p, quaternion), and the quaternion
+  rate of a base-frame angular velocity w is quat_dot = 1/2 (0, w) * quat, so A = W_p [I 0;
+  0 1/2 E(quat)] (the row of the quaternion norm vanishes on these motions and is dropped).
+* every other mechanism (Khalil tables, seed 000, 7.5-7.7; legs in chain form): the task
+  rows t - J_a qa_dot - J_x x_dot = 0 (J the twist Jacobian of the end-effector frame)
+  stacked over the closure W_a qa_dot + W_p x_dot = 0 [7.49], i.e. A = [I; 0],
+  B = [-J_a; W_a], P = [-J_x; W_p].
+
+Both forms come from the model (:mod:`optkin.model.statics`).
 
 Let ``F`` be the wrench the end effector APPLIES TO THE ENVIRONMENT (Modern Robotics 5.2 and
 7.2: "the wrench applied by the end-effector"), written in the base frame with moments
@@ -62,28 +66,21 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import casadi as ca
 import numpy as np
 
 from .. import numeric
-from .._cache import KeyedCache
 from .._checks import as_float, as_vector
 from .._checks import show as _show
-from ..analysis._functions import _twist_jacobian
 from ..errors import MechanismError, NumericError, StaticsError
 from ..mechanism import Mechanism
 from ..model import Model, get_model
+from ..model import statics as ms
 from ..results import KinResult, _jsonable
 
 __all__ = ["StaticModel", "static_model", "wrench_names"]
 
 #: default relative tolerance on singular values for the singularity tests
 SING_TOL = 1e-9
-
-_KH_CACHE: KeyedCache[ca.Function] = KeyedCache()
-
-_TASK_TO_WRENCH = {"x": "fx", "y": "fy", "z": "fz", "rx": "mx", "ry": "my", "rz": "mz"}
-_TASK_TO_TWIST = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
 
 
 def wrench_names(mech: Mechanism) -> tuple[str, ...]:
@@ -108,14 +105,7 @@ def wrench_names(mech: Mechanism) -> tuple[str, ...]:
         raise MechanismError(
             f"mech: expected an optkin Mechanism, got {type(mech).__name__}; build one with "
             "optkin.mechanisms.* or Mechanism.from_khalil / from_legs")
-    if mech.kind == "khalil":
-        return tuple(_TASK_TO_WRENCH[c] for c in mech.task)
-    return {
-        "planar": ("fx", "fy", "mz"),
-        "planar_point": ("fx", "fy"),
-        "spatial": ("fx", "fy", "fz", "mx", "my", "mz"),
-        "spatial_translational": ("fx", "fy", "fz"),
-    }[mech.platform]
+    return ms.wrench_names(get_model(mech))
 
 
 @dataclass
@@ -242,27 +232,6 @@ def _config(model: Model, q: Any) -> tuple[np.ndarray, np.ndarray]:
         return model.qa_of(qq), model.x_from_q(qq)
 
 
-def _quat_rate(quat: np.ndarray) -> np.ndarray:
-    """E (4x3) with quat_dot = E w for a base-frame angular velocity w (quat = (w, x, y, z))."""
-    qw, qv = quat[0], quat[1:]
-    S = np.array([[0, -qv[2], qv[1]], [qv[2], 0, -qv[0]], [-qv[1], qv[0], 0]])
-    return 0.5 * np.vstack([-qv[None, :], qw * np.eye(3) - S])
-
-
-def _khalil_twist(model: Model) -> ca.Function:
-    """(q_a, x) -> (J_a, J_x): the 6-row twist Jacobian (v; w) of the end-effector frame."""
-
-    def build() -> ca.Function:
-        qa, x = model.qa_sym, model.x_sym
-        T = model.pose_fn(qa, x)
-        J = _twist_jacobian(T[:3, :3], T[:3, 3], ca.vertcat(qa, x))
-        na = model.na
-        return ca.Function("twist", [qa, x], [J[:, :na], J[:, na:]], ["qa", "x"],
-                           ["J_a", "J_x"])
-
-    return _KH_CACHE.get(model.mech.key, build)
-
-
 def _null(M: np.ndarray, tol: float) -> np.ndarray:
     """Orthonormal basis of the null space of M (singular values <= tol * largest)."""
     if M.shape[1] == 0:
@@ -319,28 +288,9 @@ def static_model(mech: Mechanism, q: Any, sing_tol: float = SING_TOL) -> StaticM
                            f"{_show(sing_tol)}", path=("sing_tol",)) from None
     model = get_model(mech)
     qa, x = _config(model, q)
-    _, Wp, Wa = model.jac(qa, x)
-    Wp, Wa = np.array(Wp), np.array(Wa)
-    names = wrench_names(mech)
-    if mech.kind == "legs":
-        nl = len(mech.legs)
-        if mech.platform == "spatial":
-            quat = x[3:7] / np.linalg.norm(x[3:7])
-            E = np.zeros((7, 6))
-            E[:3, :3] = np.eye(3)
-            E[3:, 3:] = _quat_rate(quat)
-            A = Wp[:nl] @ E
-        else:
-            A = Wp[:nl]
-        B = Wa[:nl]
-        P = np.zeros((nl, 0))
-    else:
-        Ja, Jx = (np.array(v) for v in _khalil_twist(model)(qa, x))
-        rows = [_TASK_TO_TWIST[c] for c in mech.task]
-        m, r = len(rows), Wp.shape[0]
-        A = np.vstack([np.eye(m), np.zeros((r, m))])
-        B = np.vstack([-Ja[rows], Wa])
-        P = np.vstack([-Jx[rows], Wp])
+    names = ms.wrench_names(model)
+    with np.errstate(all="ignore"):
+        A, B, P = ms.velocity_constraint(model, qa, x)
     act = tuple(mech.active_names)
     if not all(np.isfinite(M).all() for M in (A, B, P)):
         return _undefined(A, B, P, names, act, sing_tol, "the closure rows have no finite "

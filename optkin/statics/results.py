@@ -15,7 +15,7 @@ __all__ = ["CapabilityResult", "PolytopeResult", "FeasibilityResult", "Workspace
 
 def _j(v: Any) -> Any:
     if isinstance(v, np.ndarray):
-        if v.dtype.kind in "fc":
+        if np.issubdtype(v.dtype, np.inexact):  # floating or complex
             return [_j(x) for x in v.tolist()] if v.ndim else _j(float(v))
         return v.tolist()
     if isinstance(v, (np.floating, float)):
