@@ -361,7 +361,9 @@ class Leg:
             if v is None:
                 if key in lt.optional:
                     continue
-                raise MechanismError(f"{where}.{key}: {t} legs need {key} ({lt.doc[key]})",
+                what = (f"{n} link length{'s' if n != 1 else ''}" if key == "lengths"
+                        else f"{key} ({lt.doc[key]})")
+                raise MechanismError(f"{where}.{key}: {t} legs need {what}",
                                      path=("legs", i, key))
             args[key] = _vec(v, n, f"{where}.{key}", ("legs", i, key))
         if "actuated" in spec and spec["actuated"] is not None:
@@ -806,7 +808,7 @@ def validate_legs(legs: Sequence[Any], platform: str, redundant: bool = False) -
         if n_act <= dof:
             raise MechanismError(
                 f"legs: a redundantly actuated {platform!r} platform needs more than {dof} "
-                f"actuated joints, got {n_act}; drop redundant=True for {dof}", path=("legs",))
+                f"actuated legs, got {n_act}; drop redundant=True for {dof} legs", path=("legs",))
     elif n_act != dof and all(leg.distance is not None for leg in out):
         # distance legs leave the platform all its freedoms: one actuator each (legs in
         # chain form constrain it; the model checks that their closure is square)

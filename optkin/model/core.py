@@ -368,6 +368,11 @@ class Model:
         return PLATFORMS[st.platform] if st.platform else None
 
     @property
+    def leg_labels(self) -> tuple[str, ...]:
+        """The type (or joint string) of each leg, for messages; empty for Khalil tables."""
+        return tuple(leg.type for leg in self.mech.legs)
+
+    @property
     def n_platform(self) -> int:
         """How many leading unknowns are the platform's coordinates (0 for Khalil)."""
         return self.topology.st.n_platform

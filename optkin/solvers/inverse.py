@@ -107,10 +107,10 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
                     continue
                 sols.append(qb)
             if not sols:
-                leg = mech.legs[part.leg]
+                label = model.leg_labels[part.leg]
                 return SolutionSet([], "postures", {
                     "success": False,
-                    "message": f"leg {part.leg + 1} ({leg.type}) cannot reach this pose"})
+                    "message": f"leg {part.leg + 1} ({label}) cannot reach this pose"})
             per_part.append([_patch(nq, part.q, q_) for q_ in sols])
         else:
             searched = True
@@ -118,10 +118,10 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
             runs += r_
             converged += c_
             if not sols and part.leg >= 0:
-                leg = mech.legs[part.leg]
+                label = model.leg_labels[part.leg]
                 return SolutionSet([], "postures", {
                     "success": False, "starts": runs,
-                    "message": f"leg {part.leg + 1} ({leg.type}) cannot reach this pose "
+                    "message": f"leg {part.leg + 1} ({label}) cannot reach this pose "
                                f"({n} starts)"})
             per_part.append(sols)
     act = np.array(mech.actuated)
@@ -143,7 +143,7 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
         else:
             nit = 0
         stats = SolverStats("closed-form" if not searched else "newton-multistart", 0.0,
-                            timer() - t0, nit, "legs" if plat is not None else "khalil",
+                            timer() - t0, nit, _method(parts),
                             {"starts": runs, "converged": converged} if searched else {})
         posture = tuple(combo) if plat is not None else None
         r = make_result(model, qa, x, tol, nit, stats, posture=posture,
