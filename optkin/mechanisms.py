@@ -19,7 +19,7 @@ from .mechanism.legs import degenerate_points
 
 __all__ = [
     "rpr3", "rpr4", "rrr3", "five_bar", "four_bar", "stewart_gough", "delta", "sr400", "akr3000",
-    "LIBRARY",
+    "upu3", "rps3", "prr3", "hexa", "pus6", "psp3", "LIBRARY",
 ]
 
 
@@ -445,6 +445,200 @@ def akr3000(
 
 
 #: name -> factory, for problem files and the command line.
+
+
+def _circle(radius: float, angles: np.ndarray) -> np.ndarray:
+    return np.c_[radius * np.cos(angles), radius * np.sin(angles), np.zeros(len(angles))]
+
+
+def upu3(base_radius: float = 1.0, platform_radius: float = 0.5) -> Mechanism:
+    """Tsai's 3-UPU translational manipulator (Tsai, ARK 1996).
+
+    Three UPU legs at 0, 120 and 240 degrees: each base universal joint turns first about
+    the tangent of the base circle (fixed to the base), then about a horizontal radial
+    axis; the platform joint's axes are the same two in reverse order, so the two inner
+    axes stay parallel, as do the outer ones (Tsai's condition): in the translational
+    operation mode the platform only translates. q_a = the three leg lengths; the platform
+    is spatial (its orientation is an unknown the legs keep at the identity).
+
+    Parameters
+    ----------
+    base_radius, platform_radius : float
+        Radii of the circles of the base and platform joint centres.
+
+    Examples
+    --------
+    >>> import numpy as np, optkin
+    >>> m = upu3(1.0, 0.5)
+    >>> r = optkin.forward(m, [1.2, 1.2, 1.2], guess=[0, 0, 1.0, 0, 0, 0])
+    >>> bool(r.success), round(float(r.pose[2, 3]), 9), bool(np.allclose(r.pose[:3, :3], np.eye(3)))
+    (True, 1.090871211, True)
+    """
+    R = _positive("base_radius", base_radius)
+    r = _positive("platform_radius", platform_radius)
+    a = 2 * np.pi * np.arange(3) / 3
+    u = np.c_[np.cos(a), np.sin(a), np.zeros(3)]
+    t = np.c_[-np.sin(a), np.cos(a), np.zeros(3)]
+    legs = [{"type": "UPU", "base": (R * u[i]).tolist(), "platform": (r * u[i]).tolist(),
+             "axis": t[i].tolist(), "arm": (-u[i]).tolist()} for i in range(3)]
+    return Mechanism.from_legs(legs, "spatial", name="3-UPU")
+
+
+def rps3(base_radius: float = 1.0, platform_radius: float = 0.5) -> Mechanism:
+    """The 3-RPS parallel manipulator: three legs at 0, 120 and 240 degrees, each a
+    passive revolute on the base whose axis is the tangent of the base circle (the leg
+    turns in the vertical plane through the base centre), an actuated prismatic joint and
+    a spherical joint on the platform. Three degrees of freedom (heave, roll, pitch with
+    coupled parasitic motions); q_a = the three leg lengths.
+
+    Examples
+    --------
+    >>> import optkin
+    >>> m = rps3(1.0, 0.5)
+    >>> len(m.active_names), optkin.dof(m).mobility
+    (3, 3)
+    """
+    R = _positive("base_radius", base_radius)
+    r = _positive("platform_radius", platform_radius)
+    a = 2 * np.pi * np.arange(3) / 3
+    u = np.c_[np.cos(a), np.sin(a), np.zeros(3)]
+    t = np.c_[-np.sin(a), np.cos(a), np.zeros(3)]
+    legs = [{"type": "RPS", "base": (R * u[i]).tolist(), "platform": (r * u[i]).tolist(),
+             "axis": t[i].tolist()} for i in range(3)]
+    return Mechanism.from_legs(legs, "spatial", name="3-RPS")
+
+
+def prr3(base: Any, directions: Any, platform: Any, distal: Any) -> Mechanism:
+    """The planar 3-PRR: three actuated sliders, each carrying a revolute joint linked by
+    a distal bar of length ``distal`` to a revolute on the platform.
+
+    Parameters
+    ----------
+    base : array (3, 2)
+        The sliders' reference points (s = 0).
+    directions : array (3, 2)
+        The sliders' unit directions.
+    platform : array (3, 2)
+        The platform joint centres in the platform frame.
+    distal : float or array (3,)
+        Distal bar lengths.
+
+    Examples
+    --------
+    >>> import optkin
+    >>> m = prr3([[0, 0], [2, 0], [1, 2]], [[1, 0], [0, 1], [-1, 0]],
+    ...          [[-0.2, -0.1], [0.2, -0.1], [0.0, 0.2]], 1.5)
+    >>> len(optkin.inverse(m, [1.0, 1.0, 0.1]))   # two postures per leg
+    8
+    """
+    b = _points(base, (3, 2), "base")
+    d = _points(directions, (3, 2), "directions")
+    p = _points(platform, (3, 2), "platform")
+    lens = _lengths(distal, 3, "distal")
+    legs = [{"type": "PRR", "base": b[i], "platform": p[i], "direction": d[i],
+             "lengths": [lens[i]]} for i in range(3)]
+    return Mechanism.from_legs(legs, "planar", name="3-PRR")
+
+
+def hexa(base_radius: float = 0.5, platform_radius: float = 0.15, crank: float = 0.35,
+         rod: float = 0.8, base_spread: float = 0.3, platform_spread: float = 0.25
+         ) -> Mechanism:
+    """The Hexa (Pierrot 1991; seed 004, Fig. 4): six RUS legs in three pairs.
+
+    Leg i turns an arm (``crank``) about the tangent of the base circle at angle
+    ``2 pi k / 3 +- base_spread``; a rod of length ``rod`` joins the arm's tip to the
+    platform point at ``2 pi k / 3 +- platform_spread`` on the platform circle. Six
+    degrees of freedom, 2^6 = 64 working modes (seed 004, Example 1); q_a = the arm angles
+    (0: arm radial outwards, turning downwards as theta grows).
+
+    Examples
+    --------
+    >>> import optkin
+    >>> m = hexa()
+    >>> len(optkin.working_modes(m))
+    64
+    """
+    Rb = _positive("base_radius", base_radius)
+    rp = _positive("platform_radius", platform_radius)
+    la = _positive("crank", crank)
+    lb = _positive("rod", rod)
+    sb = _finite("base_spread", base_spread)
+    sp = _finite("platform_spread", platform_spread)
+    k = np.repeat(2 * np.pi * np.arange(3) / 3, 2)
+    sign = np.tile([-1.0, 1.0], 3)
+    ab, ap = k + sign * sb, k + sign * sp
+    legs = []
+    for i in range(6):
+        u = np.array([np.cos(ab[i]), np.sin(ab[i]), 0.0])
+        t = np.array([-np.sin(ab[i]), np.cos(ab[i]), 0.0])
+        legs.append({"type": "RUS", "base": (Rb * u).tolist(),
+                     "platform": [rp * np.cos(ap[i]), rp * np.sin(ap[i]), 0.0],
+                     "lengths": [la, lb], "axis": t.tolist(), "arm": u.tolist()})
+    return _platform(legs, "spatial", name="Hexa")
+
+
+def pus6(rails: Any = None, direction: Any = (1.0, 0.0, 0.0), platform: Any = None,
+         rod: Any = 1.0) -> Mechanism:
+    """A 6-PUS hexaglide: six sliders on parallel rails carry universal joints; rods of
+    length ``rod`` join them to spherical joints on the platform.
+
+    Parameters
+    ----------
+    rails : array (6, 3), optional
+        Each slider's point at s = 0 (default: rails at y = +-0.15, +-0.5, +-0.85 on z = 0,
+        staggered along x).
+    direction : array (3,)
+        The rails' unit direction (shared).
+    platform : array (6, 3), optional
+        Platform joint centres in the platform frame (default: a hexagon of radius 0.25).
+    rod : float or array (6,)
+        Rod lengths.
+
+    Examples
+    --------
+    >>> import optkin
+    >>> m = pus6()
+    >>> len(optkin.inverse(m, [0.0, 0.0, 0.6, 0.0, 0.0, 0.0]))   # two postures per leg
+    64
+    """
+    if rails is None:
+        rails = [[-0.3, -0.85, 0], [-0.3, 0.85, 0], [0.3, -0.5, 0], [0.3, 0.5, 0],
+                 [0.0, -0.15, 0], [0.0, 0.15, 0]]
+    if platform is None:
+        a = np.array([-100, 100, -40, 40, -140, 140]) * np.pi / 180
+        platform = np.c_[0.25 * np.cos(a), 0.25 * np.sin(a), np.zeros(6)]
+    b = _points(rails, (6, 3), "rails")
+    p = _points(platform, (6, 3), "platform")
+    d = as_vector(direction, "direction", 3, path=("direction",))
+    lens = _lengths(rod, 6, "rod")
+    legs = [{"type": "PUS", "base": b[i], "platform": p[i], "direction": d,
+             "lengths": [lens[i]]} for i in range(6)]
+    return Mechanism.from_legs(legs, "spatial", name="hexaglide")
+
+
+def psp3(base_radius: float = 1.0, platform_radius: float = 0.4) -> Mechanism:
+    """The 3-PSP of Modern Robotics Exercise 7.5: three vertical actuated sliders at 0,
+    120 and 240 degrees on the base circle carry spherical joints, each on a slider of the
+    platform along its radial direction.
+
+    Three degrees of freedom (6 (8 - 1 - 9) + 15 = 3, Grubler); q_a = the slider heights.
+
+    Examples
+    --------
+    >>> import optkin
+    >>> m = psp3()
+    >>> optkin.dof(m).mobility
+    3
+    """
+    R = _positive("base_radius", base_radius)
+    r = _positive("platform_radius", platform_radius)
+    a = 2 * np.pi * np.arange(3) / 3
+    u = np.c_[np.cos(a), np.sin(a), np.zeros(3)]
+    legs = [{"type": "PSP", "base": (R * u[i]).tolist(), "platform": (r * u[i]).tolist(),
+             "direction": [0.0, 0.0, 1.0], "axis": u[i].tolist()} for i in range(3)]
+    return Mechanism.from_legs(legs, "spatial", name="3-PSP")
+
+
 LIBRARY: dict[str, Callable[..., Mechanism]] = {
     "rpr3": rpr3,
     "rpr4": rpr4,
@@ -455,4 +649,10 @@ LIBRARY: dict[str, Callable[..., Mechanism]] = {
     "delta": delta,
     "sr400": sr400,
     "akr3000": akr3000,
+    "upu3": upu3,
+    "rps3": rps3,
+    "prr3": prr3,
+    "hexa": hexa,
+    "pus6": pus6,
+    "psp3": psp3,
 }
