@@ -545,7 +545,7 @@ class Model:
             xn, r = f(qa, xx, self.p)
             return np.array(xn).ravel()[idx_a], r
 
-        best = _nearest_root(step, starts, ang, self.length, tol)
+        best = _nearest_root(step, starts, ang, self.length, tol, lsq=True)
         if best is not None:
             x[idx_a] = best
 
@@ -877,10 +877,11 @@ def _passive_step(topo: Topology) -> ca.Function:
     return ca.Function("passive_step", [st.qa, st.x, st.p], [xn, res])
 
 
-def _nearest_root(step, starts, angle, length, tol, iters: int = 40):
+def _nearest_root(step, starts, angle, length, tol, iters: int = 40, lsq: bool = False):
     """Iterate ``step(z) -> (z_next, res)`` from each start; the converged z nearest zero
-    (angles wrapped, lengths scaled), or None."""
-    best, best_n = None, np.inf
+    (angles wrapped, lengths scaled), or None. With ``lsq`` (a guess that need not close)
+    the points of smallest residual count as converged."""
+    found = []
     for z in starts:
         z = np.array(z, dtype=float)
         r = np.inf
@@ -890,12 +891,15 @@ def _nearest_root(step, starts, angle, length, tol, iters: int = 40):
             if not np.all(np.isfinite(zn)):
                 break
             z = zn
-        if np.all(np.isfinite(z)) and float(r) < tol:
-            w = np.where(angle, np.remainder(z + np.pi, 2 * np.pi) - np.pi, z / length)
-            nz = float(np.linalg.norm(w))
-            if nz < best_n:
-                best, best_n = np.where(angle, np.remainder(z + np.pi, 2 * np.pi) - np.pi, z), nz
-    return best
+        if np.all(np.isfinite(z)) and math.isfinite(float(r)):
+            zw = np.where(angle, np.remainder(z + np.pi, 2 * np.pi) - np.pi, z)
+            found.append((float(r), float(np.linalg.norm(np.where(angle, zw, z / length))), zw))
+    if not found:
+        return None
+    rmin = min(f[0] for f in found)
+    limit = max(tol, 1.01 * rmin + tol) if lsq else tol
+    ok = [f for f in found if f[0] <= limit]
+    return min(ok, key=lambda f: f[1])[2] if ok else None
 
 
 def _pad3(v: np.ndarray) -> np.ndarray:
