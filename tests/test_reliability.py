@@ -175,7 +175,8 @@ def _busy_worker(problem: str | None = None, timeout: float = 60.0) -> int | Non
     while time.perf_counter() - t0 < timeout:
         for w in list(wk._LIVE):
             job = w.job
-            if w.task is not None and job is not None and problem in (None, job.key):
+            if w.task is not None and job is not None and (
+                    problem is None or job.key.split("#")[0] == problem):
                 return w.proc.pid
         time.sleep(0.02)
     return None

@@ -36,6 +36,7 @@ from optkin.problems.schema import (
     input_hash,
     load_problem_bytes,
     optkin_version,
+    parse_toml,
     parse_value_path,
 )
 from optkin.problems.tasks import TaskContext, jsonable, run_task
@@ -465,6 +466,7 @@ def run_problem(
     time_limit: float | None = None,
     on_task_start: Callable[[int, float | None], None] | None = None,
     on_task_done: Callable[[int, dict[str, Any]], None] | None = None,
+    only: Iterable[int] | None = None,
 ) -> dict[str, Any]:
     """Run every task of a validated problem; never raises for a failing task.
 
@@ -474,18 +476,23 @@ def run_problem(
     running): they are not run again. ``on_task_start(i, limit)`` and
     ``on_task_done(i, record)`` report progress (the worker protocol); the time limit of
     a task (its ``time_limit``, else ``time_limit``) is enforced by the worker's parent,
-    not here. The result is ``complete`` when no task was abandoned.
+    not here. The result is ``complete`` when no task was abandoned. ``only`` runs a
+    subset of the tasks (a unit of a problem split for scheduling; the other tasks are
+    left out of the result).
     """
     t_start = time.perf_counter()
     started = _now()
     mech = problem.mechanism
     done_tasks = dict(done_tasks or {})
+    wanted = set(range(len(problem.spec.task))) if only is None else set(only)
     build_time, note = (0.0, None)
-    if len(done_tasks) < len(problem.spec.task):
+    if any(i not in done_tasks for i in wanted):
         build_time, note = _model_warmup(mech)
     stem = stem or Path(problem.display).stem
     tasks_out: list[dict[str, Any]] = []
     for i, task in enumerate(problem.spec.task):
+        if i not in wanted:
+            continue
         prior = done_tasks.get(i)
         if prior is not None:
             rec = (_abandoned_record(i, task, str(prior.get("message", "")), prior.get("time"))
@@ -572,7 +579,7 @@ def worker_job(jid: str, spec: dict[str, Any], send: Callable[[Any], None]) -> t
             problem, tmp, stem=stem, done_tasks=spec.get("done_tasks"),
             time_limit=spec.get("time_limit"),
             on_task_start=lambda i, limit: send(("task", jid, i, limit)),
-            on_task_done=task_done)
+            on_task_done=task_done, only=spec.get("only"))
     return ("done", jid, result)
 
 
@@ -739,10 +746,21 @@ def run_paths(
         else:
             todo.append((info, data))
     bar = progress(len(todo)) if (progress and todo) else None
+    units = _units(todo, pictures, split=(jobs > 1 or bool(scheduler)))
     by_key = {info.display: info for info, _ in todo}
+    pending: dict[str, list[JobOutcome]] = {}
+    n_units = {}
+    for u in units:
+        n_units[u.spec["display"]] = n_units.get(u.spec["display"], 0) + 1
 
     def done(o: JobOutcome) -> None:
-        info = by_key[o.key]
+        name = o.key.split("#", 1)[0]
+        got = pending.setdefault(name, [])
+        got.append(o)
+        if len(got) < n_units[name]:
+            return  # the problem's other units are still running
+        o = _merge(name, got)
+        info = by_key[name]
         if o.kind == "done" and o.result is not None:
             try:
                 _write_result(out, info, o.result, o.pictures)
@@ -760,19 +778,62 @@ def run_paths(
             bar.update(1)
 
     try:
-        specs = [Job(info.display, {"display": info.display, "data": data,
-                                    "source": str(info.path), "pictures": pictures})
-                 for info, data in todo]
         if scheduler:
-            _run_dask(scheduler, specs, time_limit, done)
+            _run_dask(scheduler, units, time_limit, done)
         else:
-            run_jobs(specs, n_workers=jobs, time_limit=time_limit, on_outcome=done,
+            run_jobs(units, n_workers=jobs, time_limit=time_limit, on_outcome=done,
                      threads=1 if jobs > 1 else None)
     finally:
         if bar is not None:
             bar.close()
         report.summary_path = _write_summary(out, _summary_rows(report, infos))
     return report
+
+
+def _units(todo: list[tuple[ProblemFileInfo, bytes]], pictures: bool, split: bool
+           ) -> list[Job]:
+    """The units of work, longest first (LPT): a problem is split into one unit per task
+    when several workers share the work (a unit costs little more than its task: the
+    worker keeps the problem's model), else one unit per problem. Ties keep file order."""
+    from optkin.problems.costs import PROBLEM_COST, task_costs
+
+    units: list[tuple[float, int, Job]] = []
+    for n, (info, data) in enumerate(todo):
+        spec = {"display": info.display, "data": data, "source": str(info.path),
+                "pictures": pictures}
+        try:
+            costs = task_costs(parse_toml(data, info.display))
+        except Exception:  # noqa: BLE001 - the worker reports what is wrong with the file
+            costs = [1.0]
+        if split and len(costs) > 1:
+            for i, c in enumerate(costs):
+                units.append((PROBLEM_COST + c, n,
+                              Job(f"{info.display}#{i}", dict(spec, only=[i]))))
+        else:
+            units.append((PROBLEM_COST + sum(costs), n, Job(info.display, spec)))
+    units.sort(key=lambda u: (-u[0], u[1]))
+    return [u[2] for u in units]
+
+
+def _merge(name: str, parts: list[JobOutcome]) -> JobOutcome:
+    """One problem's outcome from its units' (tasks in order, written once)."""
+    if len(parts) == 1 and "#" not in parts[0].key:
+        return parts[0]
+    bad = [p_ for p_ in parts if p_.kind != "done" or p_.result is None]
+    if bad:
+        return JobOutcome(name, bad[0].kind, message=bad[0].message)
+    results = [p_.result for p_ in parts]
+    first = min(results, key=lambda r: r["tasks"][0]["index"] if r["tasks"] else 0)
+    merged = dict(first)
+    merged["tasks"] = sorted((t for r in results for t in r["tasks"]), key=lambda t: t["index"])
+    merged["elapsed"] = sum(float(r.get("elapsed") or 0) for r in results)
+    merged["model_build_time"] = max(float(r.get("model_build_time") or 0) for r in results)
+    merged["complete"] = all(r.get("complete") for r in results)
+    merged["passed"] = all(t["passed"] for t in merged["tasks"])
+    pics: dict[str, bytes] = {}
+    for p_ in parts:
+        pics.update(p_.pictures)
+    return JobOutcome(name, "done", merged, pics)
 
 
 def validate_paths(paths: Sequence[str | os.PathLike],
@@ -853,7 +914,7 @@ def _isolated_job(spec: dict[str, Any], time_limit: float) -> dict[str, Any]:
     """Dask task: run one problem in a worker process of this Dask worker."""
     box: dict[str, Any] = {}
     job = Job(spec["display"], spec)
-    run_jobs([job], n_workers=1, time_limit=time_limit,
+    run_jobs([job], n_workers=1, time_limit=time_limit, threads=1,
              on_outcome=lambda o: box.update(outcome=o))
     o = box["outcome"]
     return {"kind": o.kind, "result": o.result, "pictures": o.pictures, "message": o.message}
@@ -865,10 +926,10 @@ def _run_dask(address: str, jobs: list[Job], time_limit: float,
     try:
         from distributed import as_completed
 
-        futures = {
+        futures = {  # the longest first, as for the local pool (jobs come sorted)
             client.submit(_isolated_job, job.spec, time_limit,
                           key=f"optkin-{input_hash(job.spec['data'])[:12]}-{i}",
-                          pure=False): job
+                          priority=len(jobs) - i, pure=False): job
             for i, job in enumerate(jobs)
         }
         for f in as_completed(list(futures)):
