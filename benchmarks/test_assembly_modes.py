@@ -61,7 +61,9 @@ def naive_multistart(mech, qa, want: int, max_starts: int, seed: int = 0):
     model = optkin.get_model(mech)
     x = ca.SX.sym("x", model.nx)
     x0 = ca.SX.sym("x0", model.nx)
-    phi = ca.substitute(ca.substitute(model.phi_sym, model.qa_sym, ca.DM(qa)), model.x_sym, x)
+    qa_s, x_s, p_s, phi_s = model.symbols  # the geometry p is an input of the closure
+    phi = ca.substitute(phi_s, ca.vertcat(qa_s, p_s), ca.vertcat(ca.DM(qa), ca.DM(model.p)))
+    phi = ca.substitute(phi, x_s, x)
     S = ca.nlpsol("naive", "ipopt", {"x": x, "p": x0, "f": ca.sumsqr(x - x0), "g": phi},
                   {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
                    "error_on_fail": False, "ipopt.tol": 1e-10})
@@ -72,7 +74,7 @@ def naive_multistart(mech, qa, want: int, max_starts: int, seed: int = 0):
     n = 0
     while n < max_starts and len(sols) < want:
         n += 1
-        if mech.platform == "spatial":
+        if model.platform.norm_row:  # a quaternion in x: uniform rotations
             q = rng.normal(size=4)
             q /= np.linalg.norm(q)
             xs = np.r_[rng.uniform(-2 * L, 2 * L, 3), q]

@@ -32,7 +32,10 @@ def _mpl():
 
 
 def chain_points(mech: Mechanism, r: KinResult) -> list[np.ndarray]:
-    """Polylines (arrays (k, 3)) of the mechanism's links at the configuration of ``r``."""
+    """Polylines (arrays (k, 3)) of the mechanism's links at the configuration of ``r``:
+    each leg from its base along its joints to its platform point, then the platform
+    polygon (more than two legs); a Khalil table's links from each frame's antecedent
+    (:func:`optkin.model.drawing.drawing`)."""
     from .solvers.common import check_mechanism, check_result_of
 
     check_mechanism(mech, "chain_points")
@@ -41,40 +44,16 @@ def chain_points(mech: Mechanism, r: KinResult) -> list[np.ndarray]:
                              f"assembly_modes, track), got {type(r).__name__}")
     check_result_of(mech, r, "r")
     checkpoint()  # validation stops here: every argument is checked
-    lines: list[np.ndarray] = []
-    if mech.kind == "khalil":
-        qmap = dict(zip(mech.joint_names, r.q))
-        table = mech.table
-        origin = {0: np.zeros(3)}
-        for f in table.frames:
-            origin[f.j] = table.transform_0(f.j, qmap)[:3, 3]
-        for f in table.frames:
-            lines.append(np.array([origin[f.a], origin[f.j]]))
-        return lines
-    T = r.pose
-    R, p = T[:3, :3], T[:3, 3]
-    plat = []
-    k = 0
-    for leg in mech.legs:
-        n = len(leg.joint_names)
-        q = r.q[k:k + n]
-        k += n
-        A = np.pad(leg.base, (0, 3 - leg.base.size))
-        P = p + R @ np.pad(leg.platform, (0, 3 - leg.platform.size))
-        pts = [A]
-        if leg.type == "RRR":
-            l1 = leg.lengths[0]
-            pts.append(A + l1 * np.array([np.cos(q[0]), np.sin(q[0]), 0.0]))
-        elif leg.type in ("RUS", "RSS"):
-            la = leg.lengths[0]
-            w = np.cross(leg.axis, leg.arm)
-            pts.append(A + la * (np.cos(q[0]) * leg.arm + np.sin(q[0]) * w))
-        pts.append(P)
-        lines.append(np.array(pts))
-        plat.append(P)
-    if len(plat) > 2:
-        lines.append(np.array(plat + [plat[0]]))
-    return lines
+    return _drawing(mech, r).lines
+
+
+def _drawing(mech: Mechanism, r: KinResult) -> Any:
+    from .model import get_model
+    from .model.drawing import drawing
+
+    model = get_model(mech)
+    pose = r.pose if model.platform is not None and r.pose is not None else None
+    return drawing(model, r.q, pose)
 
 
 def draw(
@@ -119,9 +98,16 @@ def draw(
     n = max(1, len(rs))
     cols = min(4, n)
     rows = (n + cols - 1) // cols
-    spatial = not (mech.planar or (mech.kind == "khalil" and _is_planar_khalil(mech, rs)))
+    drawings = [_drawing(mech, r) for r in rs]
+    if drawings:
+        spatial = drawings[0].dim == 3
+    else:
+        from .model import get_model
+
+        plat = get_model(mech).platform
+        spatial = plat is not None and plat.space_dim == 3
     fig = plt.figure(figsize=(3.6 * cols, 3.4 * rows))
-    lims = _common_limits(mech, rs)
+    lims = _common_limits(drawings)
     for i in range(n):
         if spatial:
             ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
@@ -131,15 +117,16 @@ def draw(
             ax.set_title("no solution")
             continue
         r = rs[i]
-        for j, line in enumerate(chain_points(mech, r)):
+        d = drawings[i]
+        for j, line in enumerate(d.lines):
             style: dict[str, Any] = {"lw": 2, "marker": "o", "ms": 4}
-            color = "C0" if mech.kind == "legs" and j < len(mech.legs) else "C1"
+            color = "C0" if j < len(d.legs) else "C1"  # legs, then platform and links
             if spatial:
                 ax.plot(line[:, 0], line[:, 1], line[:, 2], color=color, **style)
             else:
                 ax.plot(line[:, 0], line[:, 1], color=color, **style)
-        if mech.kind == "legs":  # fixed joints: black triangles
-            base = np.array([np.pad(leg.base, (0, 3 - leg.base.size)) for leg in mech.legs])
+        if len(d.base):  # fixed joints: black triangles
+            base = d.base
             if spatial:
                 ax.scatter(base[:, 0], base[:, 1], base[:, 2], marker="^", c="k", s=30)
             else:
@@ -167,16 +154,9 @@ def draw(
     return path
 
 
-def _is_planar_khalil(mech: Mechanism, rs: Sequence[KinResult]) -> bool:
-    if not rs:
-        return False
-    pts = np.vstack(chain_points(mech, rs[0]))
-    return bool(np.ptp(pts[:, 2]) < 1e-9)
-
-
-def _common_limits(mech: Mechanism, rs: Sequence[KinResult]) -> list[tuple[float, float]]:
+def _common_limits(drawings: Sequence[Any]) -> list[tuple[float, float]]:
     """Shared x/y limits for every panel, so configurations compare at a glance."""
-    pts = [np.vstack(chain_points(mech, r)) for r in rs]
+    pts = [np.vstack(d.lines) for d in drawings if d.lines]
     if not pts:
         return [(-1.0, 1.0), (-1.0, 1.0)]
     P = np.vstack(pts)

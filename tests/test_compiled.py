@@ -62,8 +62,12 @@ def cache(tmp_path_factory):
     mp.setenv("OPTKIN_CACHE", str(d))
     mp.setenv("OPTKIN_COMPILE", "auto")
     mp.delenv("OPTKIN_CC", raising=False)
+    # the compiled libraries live per topology for the whole process: start without them,
+    # so that the topologies of these tests compile into this cache
+    optkin.model.clear_cache()
     yield d
     mp.undo()
+    optkin.model.clear_cache()
 
 
 def _random_inputs(model: Model, n: int):
@@ -90,22 +94,23 @@ def test_compiled_functions_match_interpreted(cache, name):
     assert model.compiled and model.step.is_a("External")
     assert any(p.suffix in (".so", ".dll") for p in cache.iterdir())
     lib_fns = model.compiled_fns
-    result_sx = result_function(model)
+    topo = model.topology  # the Functions of the topology: the geometry is their last input
+    result_sx = result_function(topo)
     for qa, x in _random_inputs(model, 20):
         # phi, jac and pose_fn stay the interpreted SX Functions; step_sx is the SX step
-        pairs = [(lib_fns["Phi"], model.phi), (lib_fns["W"], model.jac),
-                 (lib_fns["newton_step"], model.step_sx), (lib_fns["pose"], model.pose_fn),
+        pairs = [(lib_fns["Phi"], topo.phi), (lib_fns["W"], topo.jac),
+                 (lib_fns["newton_step"], model.step_sx), (lib_fns["pose"], topo.pose_fn),
                  (lib_fns["result"], result_sx)]
         for fc, fi in pairs:
             assert not fi.is_a("External")
-            oc, oi = fc(qa, x), fi(qa, x)
+            oc, oi = fc(qa, x, model.p), fi(qa, x, model.p)
             oc = oc if isinstance(oc, (list, tuple)) else [oc]
             oi = oi if isinstance(oi, (list, tuple)) else [oi]
             for a, b in zip(oc, oi):
                 np.testing.assert_allclose(np.array(a), np.array(b), rtol=0, atol=1e-12)
         # the buffered evaluators give the same numbers as the Function call
         xn, r = model.fast("newton_step")(qa, x)
-        xi, ri = model.step_sx(qa, x)
+        xi, ri = model.step_sx(qa, x, model.p)
         np.testing.assert_allclose(xn, np.array(xi).ravel(), rtol=0, atol=1e-12)
         assert abs(r[0] - float(ri)) <= 1e-12
 
@@ -126,12 +131,13 @@ def test_compiled_tracker_matches_interpreted(cache, monkeypatch):
     f_c, compiled = model.tracker(16, 2)
     assert compiled
     monkeypatch.setenv("OPTKIN_COMPILE", "off")
+    optkin.model.clear_cache()  # what is built lives per topology: start without it
     f_i, compiled_i = Model(mech).tracker(16, 2)
     assert not compiled_i
     x0 = model.default_x(np.ones(3))
     qa0 = np.array([0.8, 0.9, 0.7])
     QA = qa0[:, None] + 0.01 * RNG.normal(size=(3, 16))
-    for a, b in zip(f_c(x0, qa0, QA), f_i(x0, qa0, QA)):
+    for a, b in zip(f_c(x0, qa0, QA, model.p), f_i(x0, qa0, QA, model.p)):
         np.testing.assert_allclose(np.array(a), np.array(b), rtol=0, atol=1e-12)
 
 
@@ -140,10 +146,10 @@ def test_fused_joint_values_match_numpy(name):
     """The joint values of the fused result Function vs Model.to_q (numpy leg_joints)."""
     mech = small_library()[name]
     model = optkin.get_model(mech)
-    f = result_function(model)
+    f = result_function(model.topology)
     for qa, x in _random_inputs(model, 10):
         x = model.canonical_x(x)
-        phi, Wp, T, q = (np.array(v) for v in f(qa, x))
+        phi, Wp, T, q = (np.array(v) for v in f(qa, x, model.p))
         assert _same_angles(q.ravel(), model.to_q(qa, x)) <= 1e-12
         np.testing.assert_allclose(T, model.pose(qa, x), atol=1e-14)
         _, Wp_ref, _ = model.jac(qa, x)
@@ -158,7 +164,9 @@ def test_fallback_without_compiler(tmp_path, monkeypatch):
     model = Model(mech)
     assert model.compile() is False
     assert not model.compiled and model.step is model.step_sx
-    assert model.compiled_batch_step(4).n_in() == 2  # the interpreted step, mapped
+    # the interpreted step, mapped; its inputs (q_a, x, geometry): the geometry became an
+    # input of every Function of the model with issue 12 (was 2: q_a, x)
+    assert model.compiled_batch_step(4).n_in() == 3
     f, compiled = model.tracker(8, 2)
     assert not compiled
     assert list(tmp_path.glob("*.so")) == []

@@ -169,14 +169,17 @@ def test_a_task_past_its_time_limit_is_abandoned_and_the_rest_runs(tmp_path: Pat
     assert report.exit_code == 1
 
 
-def _busy_worker(problem: str | None = None, timeout: float = 60.0) -> int | None:
-    """The pid of a worker of this process that is running a task (of ``problem``)."""
+def _busy_worker(problem: str | None = None, timeout: float = 60.0,
+                 task: int | None = None) -> int | None:
+    """The pid of a worker of this process that is running a task (of ``problem``; the
+    task of index ``task``: with several workers the tasks of a problem may run apart)."""
     t0 = time.perf_counter()
     while time.perf_counter() - t0 < timeout:
         for w in list(wk._LIVE):
             job = w.job
             if w.task is not None and job is not None and (
-                    problem is None or job.key.split("#")[0] == problem):
+                    problem is None or job.key.split("#")[0] == problem) and (
+                    task is None or w.task == task):
                 return w.proc.pid
         time.sleep(0.02)
     return None
@@ -226,7 +229,7 @@ def test_a_killed_worker_loses_at_most_the_task_it_held(tmp_path: Path) -> None:
     t = threading.Thread(target=lambda: box.update(r=rn.run_paths(
         [src], out=tmp_path / "out", pictures=False, jobs=2)))
     t.start()
-    killed = _busy_worker("a_slow.toml")
+    killed = _busy_worker("a_slow.toml", task=0)
     assert killed is not None, "no worker ran the slow task"
     time.sleep(0.5)
     os.kill(killed, signal.SIGKILL)

@@ -7,8 +7,9 @@ working mode free of parallel singularities, det A != 0 (Definition 5); their pr
 are the parallel aspects WA_ij in the workspace (Definition 6) and the serial aspects QA_ij
 in the joint space (Definition 7).
 
-For legs that are not cuspidal (RPR, RRR), one working mode maps homeomorphically onto its
-workspace region (each leg's posture is the closed-form branch of the mode), so the aspects
+For planar distance legs (one closed-form branch of the leg's inverse per sign of its
+B_jj), one working mode maps homeomorphically onto its workspace region (each leg's
+posture is the closed-form branch of the mode), so the aspects
 of Mf_i are the faces, inside W_i, of the planar arrangement of the curves that bound them in
 the workspace plane: the serial curves B_jj = 0 and joint-limit curves of this working mode
 (the boundary of W_i) and the parallel curves det A = 0 of this working mode, all traced by
@@ -16,12 +17,12 @@ continuation (:mod:`optkin.analysis.continuation`). Connectivity thus follows th
 curves (:mod:`optkin.analysis.planar`): a thin or small aspect is a face like any other.
 The joint-space projection QA_ij is a mask on a grid of q_a (closed-form direct kinematics
 of two-leg point platforms), with its area; the workspace projection WA_ij is a polygon
-with holes and its exact (polygon) area.
+with holes and its exact (polygon) area. The closed forms (leg inverses, circles, circle
+intersections) are the model's chart (:mod:`optkin.model.charts`).
 """
 
 from __future__ import annotations
 
-import itertools
 import os
 import time
 from collections.abc import Mapping
@@ -35,13 +36,13 @@ from ..errors import MechanismError
 from ..limits import SAFETY, check_size, show
 from ..mechanism import Mechanism
 from ..model import get_model
+from ..model.charts import PlanarChart, planar_chart
 from .continuation import (
     DEFAULT_STEP,
     MIN_POINTS,
     SingularCurves,
     _cell_cost,
     _check_mech_size,
-    _full_from_x,
     _mapping_arg,
     _pair_arg,
     _point_cost,
@@ -56,21 +57,19 @@ __all__ = ["Aspect", "Aspects", "Workspace", "aspects", "workspace", "leg_workin
 
 
 def leg_working_modes(mech: Mechanism) -> list[tuple[int, ...]]:
-    """All sign patterns of diag(B) of a planar RPR/RRR leg mechanism (seed 004, Def. 4).
+    """All sign patterns of diag(B) of a fully parallel mechanism (seed 004, Def. 4), in
+    the model's order (:meth:`optkin.model.core.Model.working_modes`).
 
-    RRR legs have two postures (B_jj of either sign); for an RPR leg B_jj = -1 always.
+    A leg whose actuated joint moves the centre of its distance constraint has two
+    postures (B_jj of either sign); one whose actuated joint is the distance has
+    B_jj = -1 always.
     """
-    if mech.kind != "legs":
-        raise MechanismError(f"{mech.name}: working modes are defined for leg mechanisms")
-    opts = []
-    for leg in mech.legs:
-        if leg.type == "RRR":
-            opts.append((1, -1))
-        elif leg.type == "RPR":
-            opts.append((-1,))
-        else:
-            raise MechanismError(f"{mech.name}: leg type {leg.type} is not planar")
-    return [tuple(p) for p in itertools.product(*opts)]
+    modes = get_model(mech).working_modes()
+    if not modes:
+        raise MechanismError(f"{mech.name}: working modes are defined for fully parallel "
+                             "mechanisms (legs that are distance constraints, one actuator "
+                             "each)")
+    return modes
 
 
 @dataclass
@@ -270,10 +269,11 @@ def _box(bounds: np.ndarray) -> np.ndarray:
     return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=float)
 
 
-def _label(mech: Mechanism, pidx, fixed: dict[int, float], P: np.ndarray, mode,
+def _label(chart: PlanarChart, pidx, fixed: dict[int, float], P: np.ndarray, mode,
            limits: dict[int, tuple[float, float]]) -> tuple[np.ndarray | None, float]:
     """The configuration of working mode ``mode`` over plane point P, and det A there."""
-    model = get_model(mech)
+    model = chart.model
+    mech = model.mech
     na, nx = model.na, model.nx
     x = np.zeros(nx)
     for i, v in fixed.items():
@@ -282,7 +282,7 @@ def _label(mech: Mechanism, pidx, fixed: dict[int, float], P: np.ndarray, mode,
     for k, i in enumerate(pidx):
         x[i - na] = P[k]
     sys = augmented_system(mech, "parallel", tuple(sorted(fixed)))
-    for V, ok in _full_from_x(mech, x[None, :]):
+    for V, ok in chart.full_points(x[None, :]):
         if not ok[0]:
             continue
         v = V[0]
@@ -305,22 +305,28 @@ def _check_plane(mech: Mechanism, fixed: Mapping[str, float] | None):
         raise MechanismError(
             f"expected an optkin Mechanism, got {type(mech).__name__}; build one with "
             "optkin.mechanisms.* or Mechanism.from_legs")
-    if mech.kind != "legs" or not mech.planar:
-        raise MechanismError(
-            f"{mech.name}: aspects and workspaces are computed for planar leg mechanisms "
-            "(2-DoF point platforms, or 3-DoF platforms at a fixed orientation phi)")
     model = get_model(mech)
+    chart = planar_chart(model)
+    if chart is None:
+        raise MechanismError(
+            f"{mech.name}: aspects and workspaces are computed for planar platforms whose "
+            "legs are distance constraints with one actuator each (2-DoF point platforms, "
+            "or 3-DoF platforms at a fixed orientation)")
     _check_mech_size(model)
     fixed = _mapping_arg(fixed, "fixed")
-    if mech.platform == "planar" and set(fixed) != {"phi"}:
+    turn = [model.x_names[j] for j in chart.orientation]
+    dof = model.platform.dof
+    if turn and set(fixed) != set(turn):
+        sec = ", ".join(f"{n!r}: value" for n in turn)
         raise MechanismError(
-            f"{mech.name}: a 3-DoF platform needs a section at fixed orientation: "
-            "fixed={'phi': value}")
-    if mech.platform == "planar_point" and fixed:
-        raise MechanismError(f"{mech.name}: a 2-DoF point platform takes no fixed coordinates")
+            f"{mech.name}: a {dof}-DoF platform needs a section at fixed orientation: "
+            f"fixed={{{sec}}}")
+    if not turn and fixed:
+        raise MechanismError(f"{mech.name}: a {dof}-DoF point platform takes no fixed "
+                             "coordinates")
     names = tuple(mech.active_names) + tuple(model.x_names)
     fixed = {k: as_float(v, f"fixed[{show(k)}]") for k, v in fixed.items()}
-    return fixed, names
+    return fixed, names, chart
 
 
 def _limit_map(mech, names, limits):
@@ -333,7 +339,7 @@ def _limit_map(mech, names, limits):
     return out
 
 
-def _region_faces(mech, curves, mode, bounds, snap, pidx, fixed_map, lim_map, with_parallel):
+def _region_faces(chart, curves, mode, bounds, snap, pidx, fixed_map, lim_map, with_parallel):
     kinds = ("serial", "limit", "parallel") if with_parallel else ("serial", "limit")
     lines = _runs(curves, mode, kinds)
     lines.append((_box(bounds), True))
@@ -345,7 +351,7 @@ def _region_faces(mech, curves, mode, bounds, snap, pidx, fixed_map, lim_map, wi
     for f in faces(lines, snap=snap):
         if f.point is None or f.area < min_area:
             continue
-        v, d = _label(mech, pidx, fixed_map, f.point, mode, lim_map)
+        v, d = _label(chart, pidx, fixed_map, f.point, mode, lim_map)
         if v is None:
             continue
         out.append((f, v, d))
@@ -366,7 +372,8 @@ def aspects(
     Parameters
     ----------
     mech : Mechanism
-        A planar leg mechanism with RPR/RRR legs: a 2-DoF point platform (the five-bar), or
+        A planar platform whose legs are distance constraints with one actuator each
+        (:func:`optkin.model.charts.planar_chart`): a 2-DoF point platform (the five-bar), or
         a 3-DoF platform in a section at fixed orientation (``fixed={"phi": value}``; the
         aspects are then those of the section).
     limits : dict name -> (lo, hi), optional
@@ -406,11 +413,11 @@ def aspects(
     [2, 3, 3, 2]
     """
     t0 = time.perf_counter()
-    fixed, names = _check_plane(mech, fixed)
+    fixed, names, chart = _check_plane(mech, fixed)
     qa_grid = check_number("qa_grid", qa_grid, integer=True, low=2)
     lim_map = _limit_map(mech, names, limits)
     model = get_model(mech)
-    qa_cost = _qa_grid_cost(mech, "aspects", qa_grid)
+    qa_cost = _qa_grid_cost(chart, "aspects", qa_grid)
     kinds = ["parallel", "serial"] + (["limit"] if lim_map else [])
     curves = _singular_curves(mech, "workspace", kinds, fixed, bounds, grid, limits, step,
                               1e-11, None, False, None, "aspects", _region_cost(model),
@@ -428,15 +435,15 @@ def aspects(
     out: list[Aspect] = []
     wareas = {}
     for mode in modes:
-        reg = _region_faces(mech, curves, mode, curves.bounds, snap, pidx, fixed_map, lim_map,
+        reg = _region_faces(chart, curves, mode, curves.bounds, snap, pidx, fixed_map, lim_map,
                             True)
         for f, v, d in reg:
             out.append(Aspect(working_mode=mode, det_sign=int(np.sign(d)), face=f, area=f.area,
                               v=v, qa=v[:model.na].copy(), x=v[model.na:].copy()))
         wareas[mode] = float(sum(f.area for f, _, _ in reg))
     qgrid = None
-    if mech.platform == "planar_point" and len(mech.legs) == 2 and out:
-        qgrid = _qa_masks(mech, out, qa_grid, lim_map)
+    if chart.two_leg_point and out:
+        qgrid = _qa_masks(chart, out, qa_grid, lim_map)
     ok = curves.success and all(a.det_sign != 0 for a in out)
     counts = {m: sum(a.working_mode == m for a in out) for m in modes}
     msg = (f"{len(modes)} working mode(s), aspects per mode "
@@ -448,42 +455,12 @@ def aspects(
                    time=time.perf_counter() - t0, workspace_area=wareas)
 
 
-def _qa_range(mech: Mechanism, j: int) -> tuple[float, float]:
-    leg = mech.legs[j]
-    if leg.type == "RRR":
-        return (-np.pi, np.pi)
-    return (0.0, 2.0 * get_model(mech).length)
-
-
-def _fk_points(mech: Mechanism, Q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Closed-form direct kinematics of a two-leg point platform: circle intersections."""
-    cs, rs = [], []
-    for j, leg in enumerate(mech.legs):
-        A = leg.base[:2] - leg.platform[:2]
-        if leg.type == "RRR":
-            l1, l2 = leg.lengths
-            cs.append(A + l1 * np.stack([np.cos(Q[:, j]), np.sin(Q[:, j])], 1))
-            rs.append(np.full(len(Q), l2))
-        else:
-            cs.append(np.broadcast_to(A, (len(Q), 2)).copy())
-            rs.append(Q[:, j])
-    c0, c1 = cs
-    r0, r1 = rs
-    dv = c1 - c0
-    dd = np.hypot(dv[:, 0], dv[:, 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = (r0**2 - r1**2 + dd**2) / (2 * dd)
-        h2 = r0**2 - a**2
-        ok = (h2 >= 0) & (dd > 1e-12)
-        h = np.sqrt(np.where(ok, h2, 0))
-        e = dv / dd[:, None]
-    m = c0 + a[:, None] * e
-    nrm = np.stack([-e[:, 1], e[:, 0]], 1)
-    return [(m + h[:, None] * nrm, ok), (m - h[:, None] * nrm, ok)]
-
-
-def _qa_masks(mech, out: list[Aspect], n: int, lim_map) -> tuple[np.ndarray, np.ndarray]:
-    r0, r1 = _qa_range(mech, 0), _qa_range(mech, 1)
+def _qa_masks(chart: PlanarChart, out: list[Aspect], n: int, lim_map
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Each aspect's joint-space projection QA_ij on an n x n grid of q_a (closed-form
+    direct kinematics of a two-leg point platform)."""
+    mech = chart.model.mech
+    r0, r1 = chart.actuator_range(0), chart.actuator_range(1)
     g0 = np.linspace(*r0, n, endpoint=False) + 0.5 * (r0[1] - r0[0]) / n
     g1 = np.linspace(*r1, n, endpoint=False) + 0.5 * (r1[1] - r1[0]) / n
     G0, G1 = np.meshgrid(g0, g1, indexing="ij")
@@ -495,7 +472,7 @@ def _qa_masks(mech, out: list[Aspect], n: int, lim_map) -> tuple[np.ndarray, np.
     inlim = np.ones(len(Q), dtype=bool)
     for i, (lo, hi) in lim_map.items():
         inlim &= (Q[:, i] >= lo) & (Q[:, i] <= hi)
-    for P, ok in _fk_points(mech, Q):
+    for P, ok in chart.point_fk(Q):
         ok = ok & inlim
         idx = np.flatnonzero(ok)
         if len(idx) == 0:
@@ -611,13 +588,13 @@ def workspace(
     245.1
     """
     t0 = time.perf_counter()
-    fixed, names = _check_plane(mech, fixed)
+    fixed, names, chart = _check_plane(mech, fixed)
     qa_grid = check_number("qa_grid", qa_grid, integer=True, low=2)
     lim_map = _limit_map(mech, names, limits)
     model = get_model(mech)
-    qa_cost = _qa_grid_cost(mech, "workspace", qa_grid)
+    qa_cost = _qa_grid_cost(chart, "workspace", qa_grid)
     kinds = ["serial"] + (["limit"] if lim_map else [])
-    has_serial = any(leg.type == "RRR" for leg in mech.legs)
+    has_serial = any(len(s_) == 2 for s_ in model.working_mode_signs)
     if not has_serial and not lim_map:
         kinds = ["parallel"]  # only the box bounds the region; parallel curves unused
     curves = _singular_curves(mech, "workspace", kinds, fixed, bounds, grid, limits, step,
@@ -635,14 +612,14 @@ def workspace(
     snap = 3.0 * float(step or DEFAULT_STEP) * model.length
     regions, areas = {}, {}
     for mode in modes:
-        reg = _region_faces(mech, curves, mode, curves.bounds, snap, pidx, fixed_map, lim_map,
+        reg = _region_faces(chart, curves, mode, curves.bounds, snap, pidx, fixed_map, lim_map,
                             False)
         regions[mode] = [f for f, _, _ in reg]
         areas[mode] = float(sum(f.area for f in regions[mode]))
     area, total = union_area([regions[m] for m in modes], 0.01 * model.length, snap)
     qmasks, qgrid = None, None
-    if mech.platform == "planar_point" and len(mech.legs) == 2:
-        qmasks, qgrid = _mode_qa_masks(mech, regions, qa_grid, lim_map)
+    if chart.two_leg_point:
+        qmasks, qgrid = _mode_qa_masks(chart, regions, qa_grid, lim_map)
     ok = (curves.success or not has_serial) and curves.status not in _STOPPED
     return Workspace(mechanism=mech.name, plane=curves.plane, working_modes=modes,
                      regions=regions, areas=areas, total=total, area=area, curves=curves,
@@ -653,10 +630,11 @@ def workspace(
                      qa_names=tuple(mech.active_names))
 
 
-def _mode_qa_masks(mech, regions, n, lim_map):
+def _mode_qa_masks(chart: PlanarChart, regions, n, lim_map):
     """The joint-space image of each working mode's region (closed-form direct kinematics
     of a two-leg point platform), on an n x n grid of q_a."""
-    r0, r1 = _qa_range(mech, 0), _qa_range(mech, 1)
+    mech = chart.model.mech
+    r0, r1 = chart.actuator_range(0), chart.actuator_range(1)
     g0 = np.linspace(*r0, n, endpoint=False) + 0.5 * (r0[1] - r0[0]) / n
     g1 = np.linspace(*r1, n, endpoint=False) + 0.5 * (r1[1] - r1[0]) / n
     G0, G1 = np.meshgrid(g0, g1, indexing="ij")
@@ -666,7 +644,7 @@ def _mode_qa_masks(mech, regions, n, lim_map):
         inlim &= (Q[:, i] >= lo) & (Q[:, i] <= hi)
     sys = augmented_system(mech, "parallel", ())
     masks = {m: np.zeros(len(Q), dtype=bool) for m in regions}
-    for P, ok in _fk_points(mech, Q):
+    for P, ok in chart.point_fk(Q):
         idx = np.flatnonzero(ok & inlim)
         if len(idx) == 0:
             continue
@@ -703,15 +681,16 @@ def _region_cost(model: Any) -> float:
     return _point_cost(model) + _REGION_POINT
 
 
-def _qa_grid_cost(mech: Mechanism, where: str, n: int) -> float:
+def _qa_grid_cost(chart: PlanarChart, where: str, n: int) -> float:
     """Check ``qa_grid`` against the memory budget, with room for a seeding chart of the
     default size and MIN_POINTS traced points (``grid`` is checked next, with the masks
     reserved); the bytes it reserves (with SAFETY)."""
-    if not (mech.platform == "planar_point" and len(mech.legs) == 2):
+    if not chart.two_leg_point:
         return 0.0  # no joint-space masks for this mechanism
-    rest = SAFETY * (_cell_cost(mech) * 32.0**2 + _region_cost(get_model(mech)) * MIN_POINTS)
+    model = chart.model
+    rest = SAFETY * (_cell_cost(model) * 32.0**2 + _region_cost(model) * MIN_POINTS)
     a, b = _COST_QA_CELL
-    per = a + b * _MASKS_PER_MODE * len(leg_working_modes(mech))
+    per = a + b * _MASKS_PER_MODE * len(model.working_modes())
     check_size(where, "qa_grid", n, per, power=2, lo=2, fixed=rest,
                unit="one cell of the joint-space masks")
     return SAFETY * per * n * n
@@ -809,7 +788,7 @@ def _plot_aspects(res: Aspects, path=None, title=None):
                                      edgecolor="k", lw=0.6))
             ax.plot(*a.x[:2], "k.", ms=3)
         for c in res.curves.curves:
-            if c.kind == "parallel":
+            if c.kind.startswith("parallel"):
                 sel = np.all(np.sign(c.B) == np.array(mode), axis=1)
                 P = np.where(sel[:, None], c.points, np.nan)
                 ax.plot(P[:, 0], P[:, 1], color="tab:red", lw=0.8)

@@ -16,17 +16,18 @@ Simple branch points are detected by a sign change of det [dG/dz; t^T] between t
 located by bisection, and every branch through them is followed (the second branch starts
 from the branch point along the null direction of dG/dz orthogonal to the first branch).
 Seeds come from sign changes of c on a coarse grid of a closed-form chart of the manifold
-(the platform coordinates with each leg's closed-form inverse, seed 003), refined by Newton;
-the grid only seeds: every point returned is a corrected point of the curve.
+(the platform coordinates with each leg's closed-form inverse, seed 003; planar platforms
+whose legs are distance constraints, :mod:`optkin.model.charts`), refined by Newton; the
+grid only seeds: every point returned is a corrected point of the curve. Mechanisms
+without such a chart (Khalil tables) are seeded by multi-start Newton on the model.
 
-For a 1-DoF Khalil mechanism (the four-bar) the curve is the configuration space itself
+For a 1-DoF mechanism (the four-bar) the curve is the configuration space itself
 (``kind="closure"``, G = Phi) and its bifurcation points are the C-space singularities of
 Modern Robotics 7.3 (seed 001).
 """
 
 from __future__ import annotations
 
-import itertools
 import numbers
 import threading
 import time
@@ -43,6 +44,8 @@ from ..errors import MechanismError
 from ..limits import SAFETY, Deadline, check_size, largest_size, memory_budget, show
 from ..mechanism import Mechanism
 from ..model import get_model
+from ..model.charts import PlanarChart, planar_chart
+from ..model.compiled import FastFn
 
 __all__ = ["Curve", "SingularCurves", "singular_curves", "augmented_system"]
 
@@ -56,18 +59,16 @@ def _wrap(a: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------
-# the augmented system, built once per (mechanism, condition, fixed variables)
+# the augmented system: Functions built once per (topology, condition, fixed variables)
 # ---------------------------------------------------------------------------------------
 
-_SYSTEMS: dict[tuple, _System] = {}
 
+class _Functions:
+    """G(z; fixed, lim, p) = [Phi; c] and dG/dz of one topology as CasADi Functions, the
+    geometry p their last input (shared by every geometry of the topology)."""
 
-class _System:
-    """G(z; p) = [Phi; c] and dG/dz as CasADi Functions; p = the fixed values (+ limit)."""
-
-    def __init__(self, mech: Mechanism, cond: str, fixed_idx: tuple[int, ...]) -> None:
-        model = get_model(mech)
-        self.mech, self.model, self.cond = mech, model, cond
+    def __init__(self, model: Any, cond: str, fixed_idx: tuple[int, ...]) -> None:
+        mech = model.mech
         na, nx = model.na, model.nx
         if model.m != nx:
             raise MechanismError(
@@ -75,14 +76,9 @@ class _System:
                 f"(got {model.m} rows for {nx} unknowns); redundantly actuated or spatial "
                 "quaternion platforms are not supported"
             )
-        self.na, self.nx, self.nv = na, nx, na + nx
-        self.names = tuple(mech.active_names) + tuple(model.x_names)
-        act_rev = [bool(mech.revolute[i]) for i in np.flatnonzero(np.array(mech.actuated))]
-        self.periodic = np.array(act_rev + list(model.x_angle), dtype=bool)
-        self.scale = np.where(self.periodic, 1.0, model.length)
-        self.fixed_idx = fixed_idx
-        self.free_idx = tuple(i for i in range(self.nv) if i not in fixed_idx)
-        qa, x, phi = model.qa_sym, model.x_sym, model.phi_sym
+        nv = na + nx
+        free_idx = tuple(i for i in range(nv) if i not in fixed_idx)
+        qa, x, p, phi = model.symbols
         v = ca.vertcat(qa, x)
         Wp = ca.jacobian(phi, x)
         Wa = ca.jacobian(phi, qa)
@@ -101,86 +97,137 @@ class _System:
             raise MechanismError(f"unknown singularity kind {cond!r}")
         rows = phi if c is None else ca.vertcat(phi, c)
         self.n_rows = int(rows.shape[0])
-        if self.n_rows != len(self.free_idx) - 1:
+        if self.n_rows != len(free_idx) - 1:
             raise MechanismError(
-                f"{mech.name}: {len(self.free_idx)} free variables and {self.n_rows} equations "
-                f"do not make a curve; fix {len(self.free_idx) - 1 - self.n_rows} more "
+                f"{mech.name}: {len(free_idx)} free variables and {self.n_rows} equations "
+                f"do not make a curve; fix {len(free_idx) - 1 - self.n_rows} more "
                 "variable(s) with fixed={name: value} (a 2-D section)"
             )
-        z = ca.SX.sym("z", len(self.free_idx))
-        p = ca.SX.sym("p", len(fixed_idx))
+        z = ca.SX.sym("z", len(free_idx))
+        pf = ca.SX.sym("fixed", len(fixed_idx))
         parts = []
         iz = ip = 0
-        for i in range(self.nv):
+        for i in range(nv):
             if i in fixed_idx:
-                parts.append(p[ip])
+                parts.append(pf[ip])
                 ip += 1
             else:
                 parts.append(z[iz])
                 iz += 1
         vv = ca.vertcat(*parts)
-        F = ca.Function("F", [v, lim], [rows])
-        G = F(vv, lim)
+        F = ca.Function("F", [v, lim, p], [rows])
+        G = F(vv, lim, p)
         J = ca.jacobian(G, z)
-        self.GJ = ca.Function("GJ", [z, p, lim], [G, J])
-        self.G = ca.Function("G", [z, p, lim], [G])
+        self.G = ca.Function("G", [z, pf, lim, p], [G])
         # one packed input and output: fewer conversions per call in the tracer's loop
-        w = ca.vertcat(z, p, lim)
-        self.nz = len(self.free_idx)
-        self.GJw = ca.Function("GJw", [w], [ca.densify(ca.vertcat(G, ca.vec(J)))])
-        # a call buffer: ~1 us per evaluation instead of ~60 us through the Python wrapper
-        self._win = np.zeros(self.GJw.nnz_in(0))
-        self._wout = np.zeros(self.GJw.nnz_out(0))
-        self._buf, self._feval = self.GJw.buffer()
-        self._buf.set_arg(0, memoryview(self._win))
-        self._buf.set_res(0, memoryview(self._wout))
-        self._lock = threading.Lock()
-
-        # labels of a full point v: det W_p and diag W_a
-        if mech.kind == "legs":
+        w = ca.vertcat(z, pf, lim)
+        self.nz = len(free_idx)
+        self.GJw = ca.Function("GJw", [w, p], [ca.densify(ca.vertcat(G, ca.vec(J)))])
+        # labels of a full point v: det W_p and diag W_a (the working mode, where B is
+        # diagonal: fully parallel mechanisms)
+        if model.fully_parallel:
             bdiag = ca.vertcat(*[Wa[j, j] for j in range(na)])
         else:
             bdiag = ca.SX.zeros(na, 1)
-        self.aux = ca.Function("aux", [v], [ca.det(Wp), bdiag])
-        self.cfun = None if c is None else ca.Function("c", [v, lim], [c])
+        self.aux = ca.Function("aux", [v, p], [ca.det(Wp), bdiag])
+        self.cfun = None if c is None else ca.Function("c", [v, lim, p], [c])
         self._maps: dict[int, Any] = {}
 
+    def mapped(self, key: int, build: Any) -> Any:
+        f = self._maps.get(key)
+        if f is None:
+            f = build()
+            if len(self._maps) < 64:
+                self._maps[key] = f
+        return f
+
+
+class _System:
+    """The augmented system of one mechanism (its topology's :class:`_Functions` with the
+    geometry filled in), for the plane variables v = (q_a, x) with ``fixed_idx`` fixed."""
+
+    def __init__(self, model: Any, cond: str, fixed_idx: tuple[int, ...]) -> None:
+        mech = model.mech
+        self.mech, self.model, self.cond = mech, model, cond
+        self.fn = model.cached(("singular_curves", cond, fixed_idx),
+                               lambda: _Functions(model, cond, fixed_idx))
+        na, nx = model.na, model.nx
+        self.na, self.nx, self.nv = na, nx, na + nx
+        self.names = tuple(mech.active_names) + tuple(model.x_names)
+        act_rev = [bool(mech.revolute[i]) for i in mech.active_index]
+        self.periodic = np.array(act_rev + list(model.x_angle), dtype=bool)
+        self.scale = np.where(self.periodic, 1.0, model.length)
+        self.fixed_idx = fixed_idx
+        self.free_idx = tuple(i for i in range(self.nv) if i not in fixed_idx)
+        self.n_rows = self.fn.n_rows
+        self.nz = self.fn.nz
+        self.geo = model.p
+        # a call buffer: ~1 us per evaluation instead of ~60 us through the Python wrapper
+        self._fast = FastFn(self.fn.GJw, fixed=(model.p,))
+        self._lock = threading.Lock()
+
+    def G(self, z: np.ndarray, pfix: np.ndarray, lim: float) -> np.ndarray:
+        return np.array(self.fn.G(z, pfix, lim, self.geo))
+
+    def G_many(self, U: np.ndarray, pfix: np.ndarray, lim: float) -> np.ndarray:
+        """G at the rows of U (N, nz): (n_rows, N)."""
+        return _in_blocks(self.fn, self.fn.G, -(10**9), U.T, [1, 2, 3],
+                          (pfix, lim, self.geo))[0]
+
     def gjw(self, w: np.ndarray) -> np.ndarray:
-        """[G; vec(dG/dz)] at w = [z; p; lim] (through the buffer; thread-safe)."""
+        """[G; vec(dG/dz)] at w = [z; fixed; lim] (through the buffer; thread-safe)."""
         with self._lock:
-            self._win[:] = w
-            self._feval()
-            return self._wout.copy()
+            (out,) = self._fast(w)
+            return out.copy()
+
+    def aux_one(self, v: np.ndarray) -> tuple[float, np.ndarray]:
+        d, b = self.fn.aux(v, self.geo)
+        return float(np.array(d).ravel()[0]), np.array(b).ravel()
 
     def c_many(self, V: np.ndarray, lim: float) -> np.ndarray:
         """c at the columns of V (nv, N)."""
-        n = V.shape[1]
-        f = self._maps.get(n)
-        if f is None:
-            f = self.cfun.map(n)
-            self._maps[n] = f
-        return np.array(f(V, lim)).ravel()
+        return _in_blocks(self.fn, self.fn.cfun, 0, V, [1, 2], (lim, self.geo))[0].ravel()
 
     def aux_many(self, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         n = V.shape[1]
-        key = -n
-        f = self._maps.get(key)
-        if f is None:
-            f = self.aux.map(n)
-            self._maps[key] = f
-        d, b = f(V)
-        return np.array(d).ravel(), np.array(b).reshape(self.na, n)
+        d, b = _in_blocks(self.fn, self.fn.aux, -(10**6), V, [1], (self.geo,))
+        return d.ravel(), b.reshape(self.na, n)
+
+
+#: Columns per evaluation of a mapped Function of the augmented system: larger sets are
+#: evaluated in blocks (CasADi's evaluation of a map holds about 2.5 KB per column).
+BLOCK = 2048
+
+
+def _in_blocks(fns: Any, f: ca.Function, tag: int, V: np.ndarray, shared: list[int],
+               rest: tuple) -> list[np.ndarray]:
+    """``f`` at the columns of ``V`` (its first input), the other inputs ``rest`` shared by
+    every column, in blocks of at most :data:`BLOCK` columns (power-of-two maps built once
+    per topology); outputs stacked by column."""
+    N = V.shape[1]
+    n = 1
+    while n < min(N, BLOCK):
+        n *= 2
+    fm = fns.mapped(tag - n, lambda: f.map(f"{f.name()}_{n}", "serial", n, shared, []))
+    outs: list[list[np.ndarray]] = [[] for _ in range(f.n_out())]
+    for s in range(0, N, n):
+        blk = V[:, s:s + n]
+        k = blk.shape[1]
+        if k < n:
+            blk = np.hstack([blk, np.repeat(blk[:, -1:] if k else np.zeros((V.shape[0], 1)),
+                                            n - k, axis=1)])
+        res = fm(blk, *rest)
+        res = res if isinstance(res, (list, tuple)) else [res]
+        for j, r in enumerate(res):
+            outs[j].append(np.array(r)[:, :k])
+    return [np.hstack(o) if o else np.zeros((f.size1_out(j), 0)) for j, o in enumerate(outs)]
 
 
 def augmented_system(mech: Mechanism, cond: str = "parallel",
                      fixed: Sequence[int] = ()) -> _System:
-    """The cached augmented system of ``mech`` (see the module docstring)."""
-    key = (mech.key, cond, tuple(sorted(fixed)))
-    s = _SYSTEMS.get(key)
-    if s is None:
-        s = _System(mech, cond, tuple(sorted(fixed)))
-        _SYSTEMS[key] = s
-    return s
+    """The augmented system of ``mech`` (see the module docstring); its Functions are built
+    once per topology, condition and fixed variables."""
+    return _System(get_model(mech), cond, tuple(sorted(fixed)))
 
 
 # ---------------------------------------------------------------------------------------
@@ -345,7 +392,7 @@ class _Tracer:
                  budget: _Budget | None = None) -> None:
         self.sys = sys
         self.budget = budget if budget is not None else _Budget()
-        self.p = pvals
+        self.pfix = pvals
         self.lim = lim
         self.free = np.array(sys.free_idx)
         self.per = sys.periodic[self.free]
@@ -366,7 +413,7 @@ class _Tracer:
 
     # scaled evaluation ------------------------------------------------------------
     def GJ(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        out = self.sys.gjw(np.concatenate([u * self.scl, self.p, [self.lim]]))
+        out = self.sys.gjw(np.concatenate([u * self.scl, self.pfix, [self.lim]]))
         m = self.sys.n_rows
         g = out[:m]
         J = out[m:].reshape(self.sys.nz, m).T * self.scl
@@ -675,74 +722,18 @@ def _trace_all(tr: _Tracer, seeds: list[np.ndarray], dedup: float) -> list[tuple
 # ---------------------------------------------------------------------------------------
 
 
-def _rot(phi):
-    return np.cos(phi), np.sin(phi)
-
-
-def _leg_ik(leg, P: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(q_a values, valid) per posture of a planar leg for platform points P (N, 2)."""
-    A = leg.base[:2]
-    d = P - A
-    L = np.hypot(d[:, 0], d[:, 1])
-    if leg.type == "RPR":
-        return [(L, L > 1e-9)]
-    if leg.type == "RRR":
-        l1, l2 = leg.lengths
-        with np.errstate(divide="ignore", invalid="ignore"):
-            c = (L * L + l1 * l1 - l2 * l2) / (2 * L * l1)
-        ok = (np.abs(c) <= 1) & (L > 1e-12)
-        beta = np.arccos(np.clip(np.nan_to_num(c), -1, 1))
-        a = np.arctan2(d[:, 1], d[:, 0])
-        return [(_wrap(a + beta), ok), (_wrap(a - beta), ok)]
-    raise MechanismError(f"singular curves: leg type {leg.type} is not planar")
-
-
-def _platform_points(mech: Mechanism, X: np.ndarray) -> list[np.ndarray]:
-    """Each leg's platform point for platform coordinates X (N, nx)."""
-    out = []
-    for leg in mech.legs:
-        b = leg.platform[:2]
-        if mech.platform == "planar":
-            c, s = _rot(X[:, 2])
-            out.append(np.stack([X[:, 0] + c * b[0] - s * b[1], X[:, 1] + s * b[0] + c * b[1]], 1))
-        else:
-            out.append(X[:, :2] + b)
-    return out
-
-
-def _full_from_x(mech: Mechanism, X: np.ndarray, fixed_leg: int | None = None,
+def _full_from_x(chart: PlanarChart, X: np.ndarray, fixed_leg: int | None = None,
                  fixed_val: np.ndarray | None = None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Full points V (N, nv) and validity for every posture combination of the legs
-    (generated one combination at a time)."""
-    Ps = _platform_points(mech, X)
-    per_leg = []
-    for k, leg in enumerate(mech.legs):
-        if k == fixed_leg:
-            per_leg.append([(fixed_val, np.ones(len(X), dtype=bool))])
-        else:
-            per_leg.append(_leg_ik(leg, Ps[k]))
-    for combo in itertools.product(*per_leg):  # one at a time: memory of one combination
-        Q = np.stack([c[0] for c in combo], 1)
-        ok = np.logical_and.reduce([c[1] for c in combo])
-        yield np.hstack([Q, X]), ok
+    (generated one combination at a time: memory of one combination), each leg's actuated
+    value from its closed-form inverse."""
+    return chart.full_points(X, fixed_leg, fixed_val)
 
 
-def _reach_box(mech: Mechanism) -> np.ndarray:
-    los, his = [], []
-    for leg in mech.legs:
-        r = sum(leg.lengths) if leg.type == "RRR" else 2.0 * get_model(mech).length
-        r += float(np.hypot(*leg.platform[:2]))
-        los.append(leg.base[:2] - r)
-        his.append(leg.base[:2] + r)
-    lo = np.max(los, axis=0)
-    hi = np.min(his, axis=0)
-    return np.array([[lo[0], hi[0]], [lo[1], hi[1]]])
-
-
-def _seeds_legs(sys: _System, cond: str, fixed: dict[int, float], lim: float, n: int,
-                bounds_full: dict[int, tuple[float, float]]) -> list[np.ndarray]:
-    """Seed points (full v) for a curve kind of a planar leg mechanism."""
-    mech = sys.mech
+def _seeds_chart(sys: _System, chart: PlanarChart, cond: str, fixed: dict[int, float],
+                 lim: float, n: int, bounds_full: dict[int, tuple[float, float]]
+                 ) -> list[np.ndarray]:
+    """Seed points (full v) for a curve kind of a mechanism with a closed-form chart."""
     na, nx = sys.na, sys.nx
     fixed_qa = [i for i in fixed if i < na]
     fixed_x = {i - na: v for i, v in fixed.items() if i >= na}
@@ -751,9 +742,9 @@ def _seeds_legs(sys: _System, cond: str, fixed: dict[int, float], lim: float, n:
     def xbox(j):
         if na + j in bounds_full:
             return bounds_full[na + j]
-        if mech.platform == "planar" and j == 2:
+        if j in chart.orientation:
             return (-np.pi, np.pi)
-        return tuple(_reach_box(mech)[j])
+        return tuple(chart.reach_box()[chart.translation.index(j)])
 
     pin_leg = None
     pin_kind = None
@@ -776,64 +767,50 @@ def _seeds_legs(sys: _System, cond: str, fixed: dict[int, float], lim: float, n:
             X[:, j] = val
         X[:, free_x[0]] = G0.ravel()
         X[:, free_x[1]] = G1.ravel()
-        for V, ok in _full_from_x(mech, X):
+        for V, ok in _full_from_x(chart, X):
             seeds += _sign_change_seeds(sys, V, ok, (n, n), lim)
         return seeds
-    # a pinned leg: its platform point moves on a circle (fixed joint / limit) or on the
-    # outstretched / folded circle (serial singularity of the leg)
-    leg = mech.legs[pin_leg]
-    A = leg.base[:2]
-    if mech.platform == "planar" and len(free_x) == 3:
-        # planar platform with only the pinned leg's constraint: chart (psi, phi)
-        if pin_kind != "fixed":
+    # a pinned leg: its platform point moves on a circle (fixed joint / limit) or on its
+    # serial loci (the leg outstretched or folded)
+    free_turn = [j for j in chart.orientation if j in free_x]
+    if free_turn:
+        # a turning platform with only the pinned leg's constraint: chart (psi, phi), psi
+        # the angle of the leg's platform point on its circle
+        if pin_kind != "fixed" or len(free_x) != 3 or len(free_turn) != 1:
             return []
         val = fixed[pin_leg]
         psi = np.linspace(-np.pi, np.pi, n, endpoint=False)
-        ph = np.linspace(*xbox(2), n)
+        ph = np.linspace(*xbox(free_turn[0]), n)
         PS, PH = np.meshgrid(psi, ph, indexing="ij")
         PS, PH = PS.ravel(), PH.ravel()
-        if leg.type == "RPR":
-            P = A + val * np.stack([np.cos(PS), np.sin(PS)], 1)
-        else:
-            l1, l2 = leg.lengths
-            P = A + l1 * np.array([np.cos(val), np.sin(val)]) + l2 * np.stack([np.cos(PS), np.sin(PS)], 1)
-        b = leg.platform[:2]
-        c, s = _rot(PH)
-        X = np.stack([P[:, 0] - (c * b[0] - s * b[1]), P[:, 1] - (s * b[0] + c * b[1]), PH], 1)
-        for V, ok in _full_from_x(mech, X, pin_leg, np.full(len(X), val)):
+        P = chart.circle(pin_leg, val, PS)
+        X = np.zeros((len(PS), nx))
+        for j, v in fixed_x.items():
+            X[:, j] = v
+        X[:, free_turn[0]] = PH
+        X = chart.place(pin_leg, P, X)
+        for V, ok in _full_from_x(chart, X, pin_leg, np.full(len(X), val)):
             seeds += _sign_change_seeds(sys, V, ok, (n, n), lim, wrap_axis0=True)
         return seeds
     # 1-D chart: the pinned relation leaves one parameter; points lie on the curve
     m = 4 * n
     th = np.linspace(-np.pi, np.pi, m, endpoint=False)
-    cands = []
+    cands: list[tuple[np.ndarray, np.ndarray]] = []
     if pin_kind == "serial":
-        if leg.type != "RRR":
-            return []
-        l1, l2 = leg.lengths
-        for r in (l1 + l2, l1 - l2):
-            cands.append((A + r * np.stack([np.cos(th), np.sin(th)], 1), th))
+        if chart.qa_angle[pin_leg]:
+            vals = th
+        else:
+            vals = np.linspace(*chart.actuator_range(pin_leg), m)
+        cands += chart.serial_loci(pin_leg, vals)
     else:
         val = lim if pin_kind == "limit" else fixed[pin_leg]
-        if leg.type == "RPR":
-            cands.append((A + val * np.stack([np.cos(th), np.sin(th)], 1), np.full(m, val)))
-        else:
-            l1, l2 = leg.lengths
-            C = A + l1 * np.array([np.cos(val), np.sin(val)])
-            cands.append((C + l2 * np.stack([np.cos(th), np.sin(th)], 1), np.full(m, val)))
-    b = leg.platform[:2]
+        cands.append((chart.circle(pin_leg, val, th), np.full(m, val)))
     for P, qk in cands:
-        X = np.zeros((m, nx))
+        X = np.zeros((len(P), nx))
         for j, v in fixed_x.items():
             X[:, j] = v
-        if mech.platform == "planar":
-            phv = X[:, 2]
-            c, s = _rot(phv)
-            X[:, 0] = P[:, 0] - (c * b[0] - s * b[1])
-            X[:, 1] = P[:, 1] - (s * b[0] + c * b[1])
-        else:
-            X[:, :2] = P - b
-        for V, ok in _full_from_x(mech, X, pin_leg, qk):
+        X = chart.place(pin_leg, P, X)
+        for V, ok in _full_from_x(chart, X, pin_leg, qk):
             seeds += [V[i] for i in np.flatnonzero(ok)[::8]]
     return seeds
 
@@ -867,16 +844,17 @@ def _sign_change_seeds(sys: _System, V: np.ndarray, ok: np.ndarray, shape: tuple
     return out
 
 
-def _seeds_khalil(sys: _System, fixed: dict[int, float], n: int, rng: np.random.Generator,
+def _seeds_newton(sys: _System, fixed: dict[int, float], n: int, rng: np.random.Generator,
                   budget: _Budget | None = None) -> list[np.ndarray]:
-    """C-space seeds of a chain with one free actuated joint: a grid over it, multi-start
-    Newton (the model's damped step) on the unknowns x."""
+    """C-space seeds of a mechanism with one free actuated joint (and no closed-form
+    chart): a grid over it, multi-start Newton (the model's damped step) on the unknowns x."""
     model = sys.model
     na = sys.na
     free_qa = [i for i in range(na) if i not in fixed]
     if len(free_qa) != 1 or any(i >= na for i in fixed):
         return []
     seeds = []
+    step = model.fast("newton_step")
     starts = rng.uniform(-np.pi, np.pi, (6, model.nx)) * model.x_scale
     qa = np.zeros(na)
     for i, v in fixed.items():
@@ -888,18 +866,18 @@ def _seeds_khalil(sys: _System, fixed: dict[int, float], n: int, rng: np.random.
         for x0 in starts:
             x = x0.copy()
             for _ in range(40):
-                xn, r = model.step(qa, x)
-                x = np.array(xn).ravel()
-                if float(r) < 1e-10:
+                xn, r = step(qa, x)
+                x = xn.copy()
+                if float(r[0]) < 1e-10:
                     break
             if np.max(np.abs(model.residual(qa, x))) < 1e-8:
                 seeds.append(np.concatenate([qa, x]))
     return seeds
 
 
-def _seeds_khalil_parallel(mech: Mechanism, names, n_lines: int, n: int, hmax: float,
+def _seeds_newton_parallel(mech: Mechanism, names, n_lines: int, n: int, hmax: float,
                            budget: _Budget | None = None) -> list[np.ndarray]:
-    """Seeds of det W_p = 0 for a 2-DoF chain: along the 1-DoF sections q_a,0 = c (C-space
+    """Seeds of det W_p = 0 for a 2-DoF mechanism without a closed-form chart: along the 1-DoF sections q_a,0 = c (C-space
     curves traced by continuation), the points where det W_p changes sign."""
     seeds: list[np.ndarray] = []
     na = get_model(mech).na
@@ -951,14 +929,16 @@ def plane_indices(mech: Mechanism, plane: Any, fixed_idx: Sequence[int]) -> tupl
         if plane in ("joint", "joints", "qa", "joint_space"):
             cand = [i for i in range(na) if i not in fixed_idx]
         elif plane in ("workspace", "task", "x", "cartesian"):
+            # the platform's position, not its orientation (angles), when it can
             cand = [na + j for j in range(model.nx) if na + j not in fixed_idx
-                    and model.x_names[j] != "phi"]
+                    and not (j < model.n_platform and model.x_angle[j])]
             if len(cand) < 2:
                 cand = [na + j for j in range(model.nx) if na + j not in fixed_idx]
         else:
             raise MechanismError(
                 f"plane: expected 'joint', 'workspace' or two coordinate names, got {show(plane)}")
-        if mech.kind == "khalil" and plane in ("joint", "joints", "qa", "joint_space") and len(cand) < 2:
+        if model.platform is None and plane in ("joint", "joints", "qa", "joint_space") \
+                and len(cand) < 2:  # a chain's joint space: its passive joints complete it
             cand = cand + [i for i in range(na, na + model.nx) if i not in fixed_idx]
         if len(cand) < 2:
             raise MechanismError(
@@ -992,8 +972,9 @@ def singular_curves(
     Parameters
     ----------
     mech : Mechanism
-        A planar leg mechanism (RPR/RRR legs; 2-DoF, or 3-DoF with one coordinate fixed)
-        or a 1-DoF Khalil mechanism (``kind="closure"``: its C-space curve).
+        A planar platform whose legs are distance constraints with one actuator each
+        (2-DoF, or 3-DoF with one coordinate fixed), a 1-DoF Khalil mechanism
+        (``kind="closure"``: its C-space curve) or a 2-DoF one.
     plane : "joint", "workspace" or (name, name)
         The plane the curves are shown in: the actuated joints q_a, the platform
         coordinates, or any two coordinates of v = (q_a, x). The curves themselves live
@@ -1099,7 +1080,7 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
                              f"or a list of them, got {show(kind)}")
     if "all" in kinds:
         kinds = ["parallel", "serial", "limit"]
-    if mech.kind == "khalil" and model.na == 1 and kinds == ["parallel"]:
+    if model.na == 1 and kinds == ["parallel"]:  # a 1-DoF mechanism: its C-space curve
         kinds = ["closure"]
     na = model.na
     conds: list[tuple[str, float]] = []
@@ -1107,11 +1088,15 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     lim_idx = _resolve_names(mech, names, list(limits), "limits")
     for k in kinds:
         if k == "serial":
-            if mech.kind != "legs":
-                raise MechanismError("kind='serial': serial curves (B_jj = 0) need a leg mechanism")
-            # RPR legs have B_jj = -1: no serial singularity (their stroke ends are limits)
+            signs = model.working_mode_signs
+            if signs is None:
+                raise MechanismError("kind='serial': serial curves (B_jj = 0) need a fully "
+                                     "parallel mechanism (legs with one actuator each, B "
+                                     "diagonal)")
+            # a leg whose actuator is its length has B_jj = -1: no serial singularity (its
+            # stroke ends are limits)
             conds += [(f"serial:{j}", 0.0) for j in range(na)
-                      if j not in fixed_idx and mech.legs[j].type == "RRR"]
+                      if j not in fixed_idx and len(signs[j]) == 2]
         elif k == "limit":
             for i, key in zip(lim_idx, limits):
                 if i >= na:
@@ -1123,23 +1108,24 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
         else:
             raise MechanismError(
                 f"kind: expected 'parallel', 'serial', 'limit', 'closure' or 'all', got {show(k)}")
-    if mech.kind == "legs" and (not mech.planar or any(leg.type not in ("RPR", "RRR") for leg in mech.legs)):
+    chart = planar_chart(model)
+    if model.platform is not None and chart is None:
         raise MechanismError(
-            f"{mech.name}: singular curves support planar RPR/RRR leg mechanisms and 1-DoF "
-            "Khalil mechanisms in this version")
+            f"{mech.name}: singular curves support planar platforms whose legs are distance "
+            "constraints (one actuator each) and Khalil mechanisms in this version")
     n = int(grid or 32)
     hmax = float(step or DEFAULT_STEP)
     # plane bounds
-    per2 = (bool(model.x_angle[pidx[0] - na]) if pidx[0] >= na else bool(mech.revolute[np.flatnonzero(np.array(mech.actuated))[pidx[0]]]),
-            bool(model.x_angle[pidx[1] - na]) if pidx[1] >= na else bool(mech.revolute[np.flatnonzero(np.array(mech.actuated))[pidx[1]]]))
+    periodic_v = [bool(mech.revolute[i]) for i in mech.active_index] + list(model.x_angle)
+    per2 = (bool(periodic_v[pidx[0]]), bool(periodic_v[pidx[1]]))
     if bounds is None:
         bx = []
-        rb = _reach_box(mech) if mech.kind == "legs" else None
+        rb = chart.reach_box() if chart is not None else None
         for j, i in enumerate(pidx):
             if per2[j]:
                 bx.append((-np.pi, np.pi))
-            elif i >= na and rb is not None and i - na < 2:
-                lo, hi = rb[i - na]
+            elif rb is not None and i >= na and i - na in chart.translation:
+                lo, hi = rb[chart.translation.index(i - na)]
                 pad = 0.05 * (hi - lo)
                 bx.append((lo - pad, hi + pad))
             else:
@@ -1149,12 +1135,12 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
         bounds_arr = _bounds_arg(bounds, plane)
     # memory, before anything is allocated: the seeding chart, then the traced points
     if budget is None:
-        cell = _cell_cost(mech)
+        cell = _cell_cost(model)
         per_point = _point_cost(model) if point_cost is None else point_cost
         # the chart leaves room for MIN_POINTS traced points at least
         check_size(where, "grid", n, cell, power=2, lo=2,
                    fixed=reserved + SAFETY * per_point * MIN_POINTS,
-                   unit=f"one seeding point of {_n_combos(mech)} posture combination(s), "
+                   unit=f"one seeding point of {_n_combos(chart)} posture combination(s), "
                    f"{MIN_POINTS} traced points being kept free")
         spent = reserved + SAFETY * cell * n * n
         if user_steps:
@@ -1175,21 +1161,22 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     pvals = np.array([fixed_map[i] for i in fixed_idx])
     # the augmented systems check that each condition makes a curve in this section
     systems = [augmented_system(mech, cond, fixed_idx) for cond, _ in conds]
-    if mech.kind != "legs" and any(c == "parallel" for c, _ in conds) and (
+    if chart is None and any(c == "parallel" for c, _ in conds) and (
             model.na != 2 or fixed_map):
         raise MechanismError(
-            f"{mech.name}: parallel curves of a Khalil mechanism need 2 actuated "
-            "joints and no section (fixed); 1-DoF chains: kind='closure'")
+            f"{mech.name}: parallel curves of a mechanism without a closed-form chart (a "
+            "Khalil table, legs in chain form) need 2 actuated joints and no section "
+            "(fixed); 1-DoF mechanisms: kind='closure'")
     checkpoint()  # validation stops here: every argument is checked
     for (cond, lim), sys in zip(conds, systems):
         if budget.exhausted():
             break
-        if mech.kind == "legs":
-            seeds_v = _seeds_legs(sys, cond, fixed_map, lim, n, bounds_full)
+        if chart is not None:
+            seeds_v = _seeds_chart(sys, chart, cond, fixed_map, lim, n, bounds_full)
         elif cond == "parallel":
-            seeds_v = _seeds_khalil_parallel(mech, names, max(8, n // 2), n, hmax, budget)
+            seeds_v = _seeds_newton_parallel(mech, names, max(8, n // 2), n, hmax, budget)
         else:
-            seeds_v = _seeds_khalil(sys, fixed_map, n, rng, budget)
+            seeds_v = _seeds_newton(sys, fixed_map, n, rng, budget)
         tr = _Tracer(sys, pvals, lim, pidx, bounds_arr, hmax, tol, max_steps, budget)
         free = np.array(sys.free_idx)
         seeds_u = [v[free] / tr.scl for v in seeds_v]
@@ -1205,10 +1192,10 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
             V[:, list(sys.free_idx)] = U
             for i in fixed_idx:
                 V[:, i] = fixed_map[i]
-            gm = sys.G.map(len(U))(U.T, pvals, lim)
-            res = np.max(np.abs(np.array(gm)), axis=0).ravel()
+            gm = sys.G_many(U, pvals, lim)
+            res = np.max(np.abs(gm), axis=0).ravel()
             detw, B = sys.aux_many(V.T)
-            wm = np.sign(B.T).astype(int) if mech.kind == "legs" else None
+            wm = np.sign(B.T).astype(int) if model.fully_parallel else None
             curves.append(Curve(cond, V, V[:, list(pidx)], res, closed, ends, wm, detw, B.T))
         for b in tr.bps:
             vb = np.empty(sys.nv)
@@ -1222,7 +1209,7 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     if do_cusps:
         found = []
         for c in curves:
-            if c.kind == "parallel":
+            if c.kind.startswith("parallel"):
                 sys = augmented_system(mech, "parallel", fixed_idx)
                 tr = _Tracer(sys, pvals, 0.0, pidx, bounds_arr, hmax, tol, max_steps, budget)
                 found += _cusps_on(tr, c, pidx, fixed_idx, fixed_map)
@@ -1231,7 +1218,7 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     # actuator (input) singularities along a 1-DoF C-space: det W_p changes sign
     act_pts = []
     for c in curves:
-        if c.kind == "closure" and c.det_Wp is not None:
+        if c.kind.startswith("closure") and c.det_Wp is not None:
             sys = augmented_system(mech, "closure", fixed_idx)
             tr = _Tracer(sys, pvals, 0.0, pidx, bounds_arr, hmax, tol, max_steps, budget)
             act_pts += _det_zeros_on(tr, c, fixed_idx, fixed_map)
@@ -1286,7 +1273,7 @@ def _det_zeros_on(tr: _Tracer, c: Curve, fixed_idx, fixed_map) -> list[np.ndarra
             if um is None:
                 break
             best = um
-            dm = float(np.array(tr.sys.aux(full(um))[0]).ravel()[0])
+            dm = tr.sys.aux_one(full(um))[0]
             if dm * d[i] > 0:
                 lo = sm
             else:
@@ -1388,7 +1375,6 @@ MIN_STEP, MAX_STEP = 1e-6, 1.0
 # condition and the sign-change search: a + b * nv bytes (nv = na + nx variables; e.g. 333
 # bytes per cell for the aspects of a five-bar, 4 combinations, at grid 1600).
 _COST_CELL = (40.0, 110.0)
-_COST_LEG = 0.0
 # Per traced point: the tracer's list, the curve arrays (v, plane points, residual, det,
 # B, working modes) and its JSON (to_dict): a + b * nv bytes.
 _COST_POINT = (600.0, 60.0)
@@ -1419,17 +1405,15 @@ class _Budget:
         return self.deadline.message(where)
 
 
-def _n_combos(mech: Mechanism) -> int:
-    if mech.kind != "legs":
-        return 1
-    return int(np.prod([2 if leg.type == "RRR" else 1 for leg in mech.legs]))
+def _n_combos(chart: PlanarChart | None) -> int:
+    """Posture combinations of the legs the seeding chart goes through."""
+    return 1 if chart is None else chart.n_combos
 
 
-def _cell_cost(mech: Mechanism) -> float:
+def _cell_cost(model: Any) -> float:
     """Bytes per cell of the seeding chart (grid^2 cells), without the safety factor."""
-    model = get_model(mech)
     a, b = _COST_CELL
-    return a + b * (model.na + model.nx) + _COST_LEG * len(getattr(mech, "legs", ()) or ())
+    return a + b * (model.na + model.nx)
 
 
 def _point_cost(model: Any) -> float:

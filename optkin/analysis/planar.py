@@ -11,6 +11,7 @@ connectivity of a region follows the traced curves, not a grid.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -191,9 +192,20 @@ def faces(lines: list[tuple[np.ndarray, bool]], snap: float, dedupe: float = 0.0
         edges_raw += [(base + q, base + q + 1) for q in range(len(ts) - 1)]
     pts = np.array(pts)
     scale = float(np.max(np.ptp(pts, axis=0))) or 1.0
-    tree = cKDTree(pts)
-    pairs = tree.query_pairs(1e-9 * scale, output_type="ndarray")
-    parent = np.arange(len(pts))
+    if not math.isfinite(scale):
+        scale = 1.0
+    tol = 1e-9 * scale
+    # vertices within tol merge: first those in one cell of a tol grid (any number of
+    # coincident points at once), then pairs of cells' representatives closer than tol
+    with np.errstate(invalid="ignore", over="ignore"):
+        cell = np.round(pts / tol)
+    cell[~np.isfinite(cell)] = 0.0
+    _, first, inv = np.unique(cell, axis=0, return_index=True, return_inverse=True)
+    inv = np.asarray(inv).ravel()
+    reps = pts[first]
+    tree = cKDTree(np.nan_to_num(reps))
+    pairs = tree.query_pairs(tol, output_type="ndarray")
+    parent = np.arange(len(reps))
 
     def find(a):
         while parent[a] != a:
@@ -205,7 +217,8 @@ def faces(lines: list[tuple[np.ndarray, bool]], snap: float, dedupe: float = 0.0
         ra, rb = find(a), find(b)
         if ra != rb:
             parent[max(ra, rb)] = min(ra, rb)
-    root = np.array([find(i) for i in range(len(pts))])
+    root_rep = np.array([find(i) for i in range(len(reps))], dtype=int)
+    root = first[root_rep][inv] if len(pts) else np.zeros(0, dtype=int)
     E = {(min(root[a], root[b]), max(root[a], root[b])) for a, b in edges_raw if root[a] != root[b]}
     # prune dangling edges
     adj: dict[int, set[int]] = {}

@@ -815,7 +815,8 @@ class DistanceForm:
         """C (N, n, 3) and r (N, n) for N rows of actuated values (N, na)."""
         QA = np.atleast_2d(np.asarray(QA, dtype=float))
         N = QA.shape[0]
-        f = self.fn.map(N) if N > 1 else self.fn
+        # (one row in every caller; more rows map serially with the geometry shared)
+        f = self.fn.map(f"{self.fn.name()}_{N}", "serial", N, [1], []) if N > 1 else self.fn
         C, r = f(QA.T, self.p)
         n = self.platform_points.shape[0]
         C = np.array(C).reshape((3, N, n), order="F").transpose(1, 2, 0)

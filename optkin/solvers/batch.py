@@ -24,8 +24,10 @@ Two layouts of the work, both on compiled CasADi code when a C compiler is prese
   follows a near-singular row, or one where det W_p extrapolated (its square, linear in
   the distance to a fold) reaches 0: the assembly mode ends at a fold. The checks cost
   about 0.3-0.5 us per row for a 3-RPR and 1.4 us for a Stewart-Gough platform
-  (``guard=False`` skips them). The first call compiles the model's libraries (about
-  0.5-1.5 s, then cached on disk).
+  (``guard=False`` skips them). The first call compiles the libraries of the model's
+  topology (about 0.5-1.5 s, then cached on disk; the geometry is an input, so another
+  geometry of the topology compiles nothing); above :data:`COMPILE_MAX` unknowns (legs in
+  chain form) only libraries already cached are used, the rest runs interpreted.
 * ``path=False``: the rows are independent; all start from ``guess`` (one guess, or one
   row of unknowns per solve) and the compiled damped Newton step, mapped over ``chunk``
   columns with threads (``Function.map(chunk, "thread", threads)``), iterates until each
@@ -44,7 +46,8 @@ from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..limits import MAX_ITERATIONS, MAX_THREADS, MAX_UNROLL, Deadline, check_sizes, show
 from ..mechanism import Mechanism
-from ..model import Model, get_model
+from ..model import Model, fused, get_model
+from ..model import compiled as cc
 from ..model.compiled import FastFn
 from ..results import KinResult, SolverStats, _jsonable
 from .common import check_mechanism, check_qa, make_result, merge_options, parse_guess, timer
@@ -66,8 +69,13 @@ BATCH_DEFAULTS: dict[str, Any] = {
     "near": 1e-3,  # conditioning indicator below which a row is near_singular
 }
 
-#: Rows per call of the mapped guard Function (one compiled library per model).
+#: Rows per call of the mapped guard Function (one compiled library per topology).
 GUARD_CHUNK = 256
+#: Most unknowns for which forward_batch compiles its libraries on first use: the tracker of
+#: a 3-UPU in chain form (19 unknowns, 49 000 instructions) takes a minute of C compiling
+#: and runs interpreted at 1 ms a point; above, libraries already in the disk cache are
+#: used (``Model.compile(tracker=(chunk, iters), guard=GUARD_CHUNK)`` builds them).
+COMPILE_MAX = 12
 #: Largest ``chunk`` (points per compiled call; one compiled library per value).
 MAX_CHUNK = 1 << 16
 # Measured memory (peak resident growth, VmHWM, of a fresh process): per row of QA, its
@@ -77,6 +85,10 @@ MAX_CHUNK = 1 << 16
 # (314 bytes measured for a five-bar at chunk = 65536). limits.SAFETY is applied on top.
 _COST_ROW = (300.0, 100.0)
 _COST_CHUNK = 100.0
+# The tracker takes the geometry as an input and repeats it for every point of a chunk
+# (its values, sparsity and the interpreted graph's work): 120-170 bytes per column and
+# entry of the geometry vector measured (14 KB a column for a five-bar, interpreted).
+_COST_GEOMETRY = 180.0
 
 
 def _row_cost(model: Model) -> float:
@@ -214,9 +226,10 @@ def _as_rows(model: Model, QA: Any) -> np.ndarray:
         )
     if A.shape[1] != na:  # (na, n): columns
         A = A.T
-    rho = [i for i, n in enumerate(model.mech.active_names) if n.endswith(".rho")]
-    if rho and A.size and np.min(A[:, rho]) <= 0:
-        raise MechanismError("QA: leg lengths (.rho columns) must be positive")
+    pos = np.flatnonzero(model.qa_positive)
+    if pos.size and A.size and np.min(A[:, pos]) <= 0:
+        names = ", ".join(model.mech.active_names[i] for i in pos)
+        raise MechanismError(f"QA: leg lengths (columns {names}) must be positive")
     return np.ascontiguousarray(A)
 
 
@@ -275,7 +288,8 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
 
     Memory and time: each row of ``QA`` costs about 300 + 100 (nx + na) bytes (solution,
     checks and JSON; 750 bytes measured for a five-bar) and each column of a compiled call
-    (``chunk``) about 100 (nx + na) bytes; both are checked against the memory budget of
+    (``chunk``) about 100 (nx + na) + 180 np bytes (np entries of the geometry vector, an
+    input the tracker repeats for every point); both are checked against the memory budget of
     :mod:`optkin.limits` before solving. When the time budget runs out the rows not yet
     solved stay NaN, the status is ``"iteration_limit"`` and ``stats.extra["stopped_at"]``
     is the first of them.
@@ -305,7 +319,7 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
     chunk = o["chunk"]
     check_sizes(
         "forward_batch",
-        ("chunk", chunk, _COST_CHUNK * (nx + na),
+        ("chunk", chunk, _COST_CHUNK * (nx + na) + _COST_GEOMETRY * model.p.size,
          {"hi": MAX_CHUNK, "unit": "one column of a compiled call"}),
         ("len(QA)", A.shape[0], _row_cost(model),
          {"lo": 0, "unit": "one row: its solution, checks and JSON"}))
@@ -321,11 +335,13 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
     path = o["path"]
     guard = (path, o["jump"], o["near"]) if o["guard"] else None
     gchunk = GUARD_CHUNK if guard else None
+    # the libraries (core, tracker, guard) are compiled in parallel; a large closure's
+    # (legs in chain form) only loaded when cached: their C takes minutes to compile
+    build = model.nx <= COMPILE_MAX
     if path:
-        # the libraries (core, tracker, guard) are compiled in parallel
-        model.compile(tracker=(chunk, o["iters"]), guard=gchunk)
+        model.compile(build=build, tracker=(chunk, o["iters"]), guard=gchunk)
         return _track(model, A, guess, tol, chunk, o["iters"], o["fallback"], guard, deadline)
-    model.compile(guard=gchunk)
+    model.compile(build=build, guard=gchunk)
     return _independent(model, A, guess, tol, chunk, o["max_iter"], o["threads"],
                         o["fallback"], guard, deadline)
 
@@ -361,8 +377,8 @@ def _checks(model: Model, A, X, ok, path: bool, jump: float, near: float):
     det = np.empty(npad)
     h = np.empty(npad)
     cpb = np.empty((npad, 4))
-    f, _ = model.guard(g)
-    ev = FastFn(f)
+    f, _ = _guard(model, g)
+    ev = FastFn(f, fixed=(model.p,))
     for s in range(0, npad, g):
         ev.into([b[s:s + g] for b in bufs], [det[s:s + g], h[s:s + g], cpb[s:s + g]])
     det, h, cpb = det[:n], h[:n], cpb[:n]
@@ -470,8 +486,8 @@ def _track(model: Model, A, guess, tol, chunk, iters, fallback, guard=None,
     nit = np.zeros(n, dtype=int)
     if n == 0:
         return _finish(model, A, X, R, nit, tol, "track", t0, {})
-    f, compiled = model.tracker(chunk, iters)
-    ev = FastFn(f)
+    f, compiled = _tracker(model, chunk, iters)
+    ev = FastFn(f, fixed=(model.p,))
     first = forward(model.mech, A[0], guess=guess, tol=tol)
     X[0], R[0], nit[0] = first.x, first.residual, first.nit
     xs, qs = np.array(first.x, dtype=float), A[0].copy()
@@ -526,6 +542,48 @@ def _track(model: Model, A, guess, tol, chunk, iters, fallback, guard=None,
                    extra, guard, stopped)
 
 
+def _interpreted() -> bool:
+    """``OPTKIN_COMPILE=off``: no compiled code, not even libraries another call built."""
+    return cc.compile_mode() == "off"
+
+
+def _tracker(model: Model, chunk: int, iters: int):
+    """The path tracker over ``chunk`` points (inputs x0, q_a0, QA, p) and whether it is
+    compiled (:meth:`optkin.model.Model.tracker`; interpreted when compiling is off)."""
+    if not _interpreted():
+        return model.tracker(chunk, iters)
+    return model.cached(("forward_batch:tracker", int(chunk), int(iters)), lambda: (
+        fused.tracker_chunk(model.topology, int(chunk), int(iters)))), False
+
+
+def _guard(model: Model, chunk: int):
+    """The row checks mapped over ``chunk`` rows (geometry last) and whether compiled."""
+    if not _interpreted():
+        return model.guard(chunk)
+    return model.cached(("forward_batch:guard", int(chunk)), lambda: (
+        fused.guard_chunk(model.topology, int(chunk))[0])), False
+
+
+def _step(model: Model):
+    """The damped Newton step (q_a, x, p): compiled when available and compiling is on."""
+    return model.step_sx if _interpreted() else model.step
+
+
+def _step_map(model: Model, chunk: int, threads: int) -> FastFn:
+    """The model's damped Newton step (compiled when available) mapped over ``chunk``
+    columns, the map built once per topology, as an evaluator with the geometry filled in:
+    one thread, the geometry unmapped; more threads, the geometry repeated for every
+    column (CasADi's threaded map of a Function with unmapped inputs ran 10x slower)."""
+    step = _step(model)
+    key = ("forward_batch:step", int(chunk), int(threads), step.is_a("External"))
+    if threads > 1:
+        fm = model.cached(key, lambda: step.map(int(chunk), "thread", int(threads)))
+        return FastFn(fm, fixed=(np.tile(model.p[:, None], (1, int(chunk))),))
+    fm = model.cached(key, lambda: step.map(f"newton_step_{int(chunk)}", "serial", int(chunk),
+                                            [2], []))
+    return FastFn(fm, fixed=(model.p,))
+
+
 def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback,
                  guard=None, deadline: Deadline | None = None) -> BatchResult:
     t0 = timer()
@@ -542,8 +600,7 @@ def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback
         for i in range(n):
             X0[i] = model.default_x(A[i]) if x_one is None else x_one
     chunk = min(chunk, max(n, 1))
-    fmap = model.step.map(chunk, "thread", threads)
-    ev = FastFn(fmap)
+    ev = _step_map(model, chunk, threads)
     X = X0.copy()
     R = np.full(n, np.inf)
     nit = np.zeros(n, dtype=int)
@@ -595,7 +652,7 @@ def _independent(model: Model, A, guess, tol, chunk, max_iter, threads, fallback
             r = forward(model.mech, A[i], guess=X0[i], tol=tol)
             nfall += 1
             X[i], R[i], nit[i] = r.x, r.residual, nit[i] + r.nit
-    compiled = model.compiled
+    compiled = _step(model).is_a("External")
     extra = {"compiled": compiled, "fallback": nfall, "chunks": calls, "chunk": chunk,
              "threads": threads, "path": False}
     return _finish(model, A, X, R, nit, tol, "compiled-newton" if compiled else "newton", t0,

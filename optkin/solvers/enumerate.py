@@ -2,20 +2,32 @@
 
 :func:`assembly_modes` solves the direct geometric model Phi(q_a, x) = 0 ([7.9] of seed 000)
 from many starting points at once. The starts are low-discrepancy (Sobol) points
-over the unknowns: joint angles over [-pi, pi) for Khalil mechanisms, SO(2) angles or
-uniform unit quaternions (Shoemake's map of Sobol points) for platforms, positions in the
-box where every leg can still close (every leg type here is a distance constraint: a
-prismatic leg to its base joint, an RRR or RUS leg to its elbow, fixed once q_a is known, so
-the platform point lies in a ball). For spatial platforms on six legs the position is not
-sampled: differences of the squared leg equations are linear in the position (the
-elimination of Modern Robotics 7.1.1 and 7.1.2), so each sampled orientation gets its
-least-squares position (measured: it converges in fewer iterations; for planar platforms box
-starts reach rare modes far more often, so they keep them). The Sobol points are randomised
-by a shift drawn from ``seed`` (Cranley-Patterson rotation).
+over the unknowns, drawn as the model says what each unknown is
+(:mod:`optkin.model.enumeration`): joint angles over [-pi, pi) for Khalil mechanisms; for
+platforms SO(2) angles or uniform unit quaternions (Shoemake's map of Sobol points) and
+positions in the box where every leg can still close (each leg confines the platform to a
+ball: a distance leg |P - C(q_a)| = r puts its platform point in the ball of radius r about
+C, a chain of joints is followed from its end to its base, every passive revolute growing
+the ball by the distance of its centre from the axis); the variables of legs written as
+chains (``Leg.from_screws``, UPU, RPS, PSP, ...) are drawn from the sampled pose, each leg
+brought to reach it by a few Gauss-Newton steps on its own variables. For spatial
+platforms on six distance legs the position is not sampled: differences of the squared
+leg equations are linear in the position (the elimination of Modern Robotics 7.1.1 and
+7.1.2), so each sampled orientation gets its least-squares position (measured: it
+converges in fewer iterations; for planar platforms box starts reach rare modes far more
+often, so they keep them). The Sobol points are randomised by a shift drawn from ``seed``
+(Cranley-Patterson rotation).
+
+An assembly mode is a solution of the closure up to what identifies it: for a platform its
+pose (the legs' passive joints of a chain are postures of the legs: two postures of a leg
+reaching one pose are one mode), for a Khalil table all its unknowns.
 
 The starts run through Khalil's iteration (Newton with the step clamped to a threshold S,
 [7.55]) compiled into one CasADi Function mapped over a pool of columns (C code through
-:mod:`optkin.model.compiled`, cached on disk, for 6+ unknowns). Converged columns are
+:mod:`optkin.model.compiled`, cached on disk per topology, for 6+ unknowns: the geometry is
+an input, so a new geometry of a known topology compiles nothing). Above
+:data:`FUSED_MAX` unknowns (legs in chain form) the closure and its Jacobian are mapped
+and compiled, and the linear solves are done by numpy. Converged columns are
 deduplicated as they arrive (angles modulo 2 pi, quaternion sign, a tolerance relative to
 the mechanism size) and replaced by fresh starts. Exclusion rather than deflation: a start
 that enters the quadratic-convergence region of a known solution (|Phi| < 1e-5 L, within
@@ -45,9 +57,10 @@ below its known bound or without one; ``target_upper=1`` drops it), after at lea
 ``min_starts`` (256 starts for small systems and 2048 for 6+ unknowns, set so that modes
 hit by 0.3 % of the starts, as the rarest of Dietmaier's platform are, are found), when the
 number of
-solutions reaches a known upper bound for the mechanism class (6 for a planar platform with
-three distance legs, 40 for a 6-6 platform, 2 for a five-bar or a Delta: the set is then
-provably complete), or at the start budget or time limit. Below such an even bound an odd
+solutions reaches a known upper bound read from the structure of the closure (distance legs
+with centres and radii fixed by q_a: 6 for a planar platform on three, 40 for a spatial one
+on six, 2 for a point or a translating platform, e.g. a five-bar or a Delta: the set is then
+provably complete; :func:`known_bound`), or at the start budget or time limit. Below such an even bound an odd
 count means a mode is still missing (non-real solutions come in conjugate pairs; only a
 double root at a singularity breaks this), so the target may stop the run only after four
 times ``min_starts``. IPOPT ([7.9] as an NLP) only rescues starts that stalled.
@@ -62,7 +75,6 @@ mechanism (Chablat and Wenger, seed 004, Definition 4) and, at a pose, which exi
 
 from __future__ import annotations
 
-import itertools
 import numbers
 import time
 import warnings
@@ -89,8 +101,9 @@ from ..limits import (
     time_budget,
 )
 from ..mechanism import Mechanism
-from ..mechanism.geometry import wrap_angle
 from ..model import Model, get_model
+from ..model import enumeration as _enum
+from ..model.compiled import FastFn
 from ..results import KinResult, SolutionSet, SolverStats
 from .common import (
     check_mechanism,
@@ -141,117 +154,34 @@ TRACK_DEFAULTS: dict[str, Any] = {
     "contraction": 0.5,  # largest corrector move relative to the predicted move
 }
 
-_PLATFORM_BOUNDS = {"planar": 6, "planar_point": 2, "spatial": 40, "spatial_translational": 2}
-
 
 def known_bound(mech: Mechanism) -> int | None:
-    """An upper bound on the number of real assembly modes, when the class has one.
+    """An upper bound on the number of real assembly modes, when the structure has one.
 
-    Every leg type here is a distance constraint between a platform point and a point fixed
-    by q_a, so a planar platform on three legs has at most 6 modes (the sextic of Modern
-    Robotics 7.1.1), a spatial one on six legs at most 40 (Raghavan and Roth), a point on two
-    legs (five-bar) or a translating platform on three (Delta) at most 2. None otherwise
-    (Khalil mechanisms, redundant actuation).
+    Read from the model's closure (:func:`optkin.model.enumeration.known_bound`): when
+    every leg is a distance constraint between a platform point and a point fixed by q_a
+    (one actuator and one row per leg, one leg per platform freedom), a planar platform
+    that turns has at most 6 modes (the sextic of Modern Robotics 7.1.1), a spatial one at
+    most 40 (Raghavan and Roth), a platform that does not turn (a five-bar's point, a
+    Delta) at most 2. None otherwise (Khalil tables, chains, redundant actuation).
+
+    >>> import optkin
+    >>> known_bound(optkin.mechanisms.five_bar(2.0, 1.5, 2.0, 2.0, 1.5))
+    2
     """
-    if mech.kind != "legs":
-        return None
-    need = {"planar": 3, "planar_point": 2, "spatial": 6, "spatial_translational": 3}
-    if len(mech.legs) != need.get(mech.platform, -1):
-        return None
-    return _PLATFORM_BOUNDS[mech.platform]
+    return _enum.known_bound(get_model(mech))
 
 
 # ---------------------------------------------------------------------------------------------
-# the distance form of leg mechanisms: |p + R b_i - c_i(q_a)| = r_i(q_a)
+# starting points
 # ---------------------------------------------------------------------------------------------
 
-
-def _pad3(v: np.ndarray) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    return np.concatenate([v, np.zeros(3 - v.size)]) if v.size < 3 else v
-
-
-def _distance_form(model: Model, qa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """(centres c (n, 3), radii r (n,), platform points b (n, 3)) of the legs, or None.
-
-    Mirrors the leg rows of the model; checked against ``model.phi`` at a test point, so a
-    leg type written differently there falls back to plain box sampling.
-    """
-    mech = model.mech
-    if mech.kind != "legs":
-        return None
-    cs, rs, bs = [], [], []
-    for i, leg in enumerate(mech.legs):
-        A = _pad3(leg.base)
-        a = float(qa[i])
-        if leg.type in ("RPR", "UPS", "SPS"):
-            c, r = A, a
-        elif leg.type == "RRR":
-            l1, l2 = leg.lengths
-            c, r = A + l1 * np.array([np.cos(a), np.sin(a), 0.0]), l2
-        elif leg.type in ("RUS", "RSS"):
-            la, lb = leg.lengths
-            arm = np.asarray(leg.arm, dtype=float)
-            w = np.cross(np.asarray(leg.axis, dtype=float), arm)
-            c, r = A + la * (np.cos(a) * arm + np.sin(a) * w), lb
-        else:
-            return None
-        cs.append(c)
-        rs.append(r)
-        bs.append(_pad3(leg.platform))
-    c, r, b = np.array(cs), np.array(rs, dtype=float), np.array(bs)
-    ok = _FORM_OK.get(mech.key)
-    if ok is not None:
-        return (c, r, b) if ok else None
-    # check against the model at a test point (once per mechanism)
-    rng = np.random.default_rng(12345)
-    x = model.default_x(qa) + 0.1 * model.x_scale * rng.standard_normal(model.nx)
-    if mech.platform == "spatial":
-        x[3:7] /= np.linalg.norm(x[3:7])
-    R, p = _frame_np(mech.platform, x[None, :])
-    f = np.linalg.norm(p[0] + b @ R[0].T - c, axis=1) - r
-    ref = model.residual(qa, x)[: len(mech.legs)]
-    ok = bool(np.allclose(f, ref, atol=1e-9 * max(1.0, model.length)))
-    _FORM_OK[mech.key] = ok
-    return (c, r, b) if ok else None
-
-
-def _frame_np(platform: str, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(R (n, 3, 3), p (n, 3)) of the platform for rows of unknowns X (n, nx)."""
-    n = X.shape[0]
-    R = np.zeros((n, 3, 3))
-    p = np.zeros((n, 3))
-    if platform == "planar":
-        c, s = np.cos(X[:, 2]), np.sin(X[:, 2])
-        R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
-        p[:, :2] = X[:, :2]
-    elif platform == "spatial":
-        w, a, b_, c_ = X[:, 3], X[:, 4], X[:, 5], X[:, 6]
-        R[:, 0] = np.stack([1 - 2 * (b_ * b_ + c_ * c_), 2 * (a * b_ - c_ * w), 2 * (a * c_ + b_ * w)], 1)
-        R[:, 1] = np.stack([2 * (a * b_ + c_ * w), 1 - 2 * (a * a + c_ * c_), 2 * (b_ * c_ - a * w)], 1)
-        R[:, 2] = np.stack([2 * (a * c_ - b_ * w), 2 * (b_ * c_ + a * w), 1 - 2 * (a * a + b_ * b_)], 1)
-        p[:, :] = X[:, :3]
-    else:
-        R[:] = np.eye(3)
-        k = 2 if platform == "planar_point" else 3
-        p[:, :k] = X[:, :k]
-    return R, p
-
-
-def shoemake(U: np.ndarray) -> np.ndarray:
-    """Unit quaternions (w, x, y, z), uniform on SO(3), from points U (n, 3) of [0, 1)^3
-    (Shoemake's subgroup algorithm); w >= 0."""
-    u1, u2, u3 = U[:, 0], U[:, 1], U[:, 2]
-    a, b = np.sqrt(1.0 - u1), np.sqrt(u1)
-    q = np.stack([b * np.cos(2 * np.pi * u3), a * np.sin(2 * np.pi * u2),
-                  a * np.cos(2 * np.pi * u2), b * np.sin(2 * np.pi * u3)], 1)
-    return q * np.where(q[:, :1] < 0, -1.0, 1.0)
-
+#: Re-exported: uniform unit quaternions from points of the unit cube.
+shoemake = _enum.shoemake
 
 _SOBOL: dict[int, np.ndarray] = {}
 #: Sobol points per dimension kept in the process-wide cache (beyond: generated per run).
 _SOBOL_CACHED = 1 << 16
-_FORM_OK: dict[str, bool] = {}
 
 
 class _ShiftedSobol:
@@ -270,6 +200,8 @@ class _ShiftedSobol:
         self.engine: qmc.Sobol | None = None
 
     def random(self, n: int) -> np.ndarray:
+        if self.dim == 0:
+            return np.zeros((n, 0))
         need = self.pos + n
         if need <= _SOBOL_CACHED:
             base = _SOBOL.get(self.dim)
@@ -296,88 +228,68 @@ def _sobol(dim: int, seed: int) -> _ShiftedSobol:
 
 
 class _Starts:
-    """Low-discrepancy starting points x (columns) for one mechanism and q_a."""
+    """Low-discrepancy starting points x (columns) for one mechanism and q_a.
 
-    def __init__(self, model: Model, qa: np.ndarray, seed: int, block: int) -> None:
+    What each unknown is comes from the model (:func:`optkin.model.enumeration.layout`):
+    Khalil unknowns in a box (angles over [-pi, pi), lengths over twice the mechanism's
+    size); platform angles uniform, quaternions by Shoemake's map, the origin in the reach
+    box or, for a turning spatial platform on distance legs, at its least-squares position;
+    the variables of legs in chain form drawn from the sampled pose
+    (:func:`optkin.model.enumeration.seed_legs`).
+    """
+
+    def __init__(self, model: Model, qa: np.ndarray, seed: int, block: int,
+                 jit: bool | str = False) -> None:
         self.model = model
-        mech = model.mech
+        self.qa = np.asarray(qa, dtype=float)
         self.block = block
+        self.jit = jit
         self.empty_reason: str | None = None
-        self.lo = self.hi = None
-        self.ls = False
         self.buf = np.zeros((model.nx, 0))
-        plat = mech.platform if mech.kind == "legs" else None
-        self.plat = plat
-        if mech.kind == "khalil":
-            self.dim = model.nx
+        self.lay = lay = _enum.layout(model)
+        self.rng = np.random.default_rng([int(seed), 1])
+        self.ls = False
+        if lay.box.size:
             L = 2.0 * model.length
-            self.lo = np.where(model.x_angle, -np.pi, -L)
-            self.hi = np.where(model.x_angle, np.pi, L)
+            ang = lay.angle[lay.box]
+            self.lo = np.where(ang, -np.pi, -L)
+            self.hi = np.where(ang, np.pi, L)
+            self.dim = int(lay.box.size)
         else:
-            form = _distance_form(model, qa)
-            self.form = form
-            ndim = 2 if mech.planar else 3
-            rot = plat in ("planar", "spatial")
-            if form is not None:
-                c, r, b = form
-                reach = r + (np.linalg.norm(b, axis=1) if rot else 0.0)
-                cen = c if rot else c - b
-                lo = np.max(cen - reach[:, None], axis=0)[:ndim]
-                hi = np.min(cen + reach[:, None], axis=0)[:ndim]
-                if np.any(lo > hi + 1e-12 * model.length):
-                    k = int(np.argmax(lo - hi))
-                    self.empty_reason = (
-                        f"the legs cannot all reach a common platform "
-                        f"position (their reach boxes do not overlap along axis {'xyz'[k]})"
-                    )
-                hi = np.maximum(hi, lo)
-                # the least-squares position needs as many independent differences as
-                # coordinates; it speeds up spatial platforms, while planar ones reach rare
-                # modes far more often from box starts (measured: 3-RPR modes hit by 0.1 % of
-                # least-squares starts get 3 % or more of box starts)
-                self.ls = plat == "spatial" and len(mech.legs) - 1 >= ndim
-            else:
-                base = np.array([_pad3(leg.base) for leg in mech.legs])[:, :ndim]
-                span = 2.0 * model.length + float(np.max(np.abs(qa))) if qa.size else 2.0 * model.length
-                lo, hi = base.min(0) - span, base.max(0) + span
+            lo, hi, why = _enum.reach_box(model, self.qa)
+            self.empty_reason = why
             self.plo, self.phi = lo, hi
-            nrot = {"planar": 1, "spatial": 3}.get(plat, 0)
-            self.nrot = nrot
-            self.ndim = ndim
-            self.dim = nrot + (0 if self.ls else ndim)
+            # the least-squares position speeds up spatial platforms, while planar ones reach
+            # rare modes far more often from box starts (measured: 3-RPR modes hit by 0.1 % of
+            # least-squares starts get 3 % or more of box starts)
+            self.ls = _enum.least_squares_available(model)
+            self.nrot = int(lay.turn.size + (3 if lay.quat.size else 0))
+            self.dim = self.nrot + (0 if self.ls else int(lay.pos.size))
         self.sob = _sobol(self.dim, seed)
 
     def _make(self, U: np.ndarray) -> np.ndarray:
-        model = self.model
-        if self.model.mech.kind == "khalil":
-            return (self.lo + U * (self.hi - self.lo)).T
+        model, lay = self.model, self.lay
         n = U.shape[0]
-        plat = self.plat
         X = np.zeros((n, model.nx))
-        if plat == "planar":
-            X[:, 2] = -np.pi + 2 * np.pi * U[:, 0]
-        elif plat == "spatial":
-            X[:, 3:7] = shoemake(U[:, :3])
+        if lay.box.size:
+            X[:, lay.box] = self.lo + U * (self.hi - self.lo)
+            return X.T
+        col = 0
+        for i in lay.turn:
+            X[:, i] = -np.pi + 2 * np.pi * U[:, col]
+            col += 1
+        if lay.quat.size:
+            X[:, lay.quat] = shoemake(U[:, col:col + 3])
+            col += 3
         if self.ls:
-            R, _ = _frame_np(plat, X)
-            X[:, : self.ndim] = self._ls_position(R)
+            R = _enum.platform_rotations(model, X[:, : model.n_platform])
+            P = _enum.least_squares_positions(model, self.qa, R)
+            X[:, lay.pos] = np.clip(P[:, : lay.pos.size], self.plo, self.phi)
         else:
-            X[:, : self.ndim] = self.plo + U[:, self.nrot:] * (self.phi - self.plo)
+            X[:, lay.pos] = self.plo + U[:, col:] * (self.phi - self.plo)
+        if lay.legs.size:
+            _enum.seed_legs(model, X, self.qa, self.rng, jit=self.jit)
         return X.T
-
-    def _ls_position(self, R: np.ndarray) -> np.ndarray:
-        """Positions p minimising the differences of the squared leg equations
-        |p|^2 + 2 p.d_i + |d_i|^2 - r_i^2 = 0, d_i = R b_i - c_i (linear in p)."""
-        c, r, b = self.form
-        k = self.ndim
-        d = (np.einsum("nij,kj->nki", R, b) - c[None])[:, :, :k]
-        e = np.sum(d * d, axis=2) - r[None] ** 2
-        A = 2.0 * (d[:, 1:] - d[:, :1])
-        rhs = -(e[:, 1:] - e[:, :1])
-        AtA = np.einsum("nki,nkj->nij", A, A) + 1e-12 * np.eye(k)
-        Atb = np.einsum("nki,nk->ni", A, rhs)
-        p = np.linalg.solve(AtA, Atb[..., None])[..., 0]
-        return np.clip(p, self.plo, self.phi)
 
     def take(self, n: int) -> np.ndarray:
         while self.buf.shape[1] < n:
@@ -390,59 +302,157 @@ class _Starts:
 # the compiled, mapped step
 # ---------------------------------------------------------------------------------------------
 
-_STEPS: dict[tuple, tuple[ca.Function, float, bool]] = {}
+#: Largest number of unknowns for which the whole clamped Newton step (the linear solve
+#: included) is one CasADi expression; above it the solve is done by numpy (LAPACK) on
+#: the mapped Jacobians: the symbolic solve of a 37-unknown closure (a 6-UPS platform in
+#: chain form) is 10^5 instructions and 40 s of C compiling, its Jacobian alone 4 s.
+FUSED_MAX = 12
 
 
 def _clamped_step(model: Model, step_max: float, k: int = 1) -> ca.Function:
     """k iterations x -> x + dx min(1, S / |dx / scale|), dx the Newton (Gauss-Newton when
     there are more rows than unknowns) step: Khalil's clamped iteration [7.55]. Returns the
-    new x and max |Phi| there."""
-    x, qa, phi = model.x_sym, model.qa_sym, model.phi_sym
+    new x and max |Phi| there. Inputs (q_a, x, p): the geometry is an input."""
+    qa, x, p, phi = model.symbols
     Wp = ca.jacobian(phi, x)
     if model.m == model.nx:
         dx = -ca.solve(Wp, phi)
     else:
         dx = -ca.solve(ca.mtimes(Wp.T, Wp), ca.mtimes(Wp.T, phi))
-    nrm = ca.norm_2(dx / model.x_scale)
-    one = ca.Function("one", [qa, x], [x + dx * ca.fmin(1, step_max / (nrm + 1e-300))])
+    nrm = ca.norm_2(dx / model.topology.x_scale_sym)
+    one = ca.Function("one", [qa, x, p], [x + dx * ca.fmin(1, step_max / (nrm + 1e-300))])
     xs = x
     for _ in range(k):
-        xs = one(qa, xs)
-    fphi = ca.Function("phi", [qa, x], [ca.mmax(ca.fabs(phi)) if model.m else ca.SX(0)])
-    return ca.Function("clamped_newton", [qa, x], [xs, fphi(qa, xs)], ["qa", "x"],
-                       ["x_next", "res"])
+        xs = one(qa, xs, p)
+    fphi = ca.Function("phi", [qa, x, p], [ca.mmax(ca.fabs(phi)) if model.m else ca.SX(0)])
+    return ca.Function("clamped_newton", [qa, x, p], [xs, fphi(qa, xs, p)],
+                       ["qa", "x", "p"], ["x_next", "res"])
+
+
+def _no_compiler_warning() -> None:
+    warnings.warn("assembly_modes: no compiled step (no C compiler, or compiling is "
+                  "off: OPTKIN_COMPILE); using the CasADi virtual machine (slower)",
+                  stacklevel=4)
+
+
+#: Widest mapped step kept per topology (a map holds 40 bytes per column and entry of the
+#: geometry vector: wider ones are built for the call).
+_CACHED_WIDTH = 1024
+
+
+def _mapped(model: Model, f: ca.Function, width: int, threads: int) -> tuple[ca.Function, bool]:
+    """``f`` (q_a, x, p) mapped over ``width`` columns, and whether q_a and p are single
+    columns (a serial map) or repeated for every column (a map over threads: CasADi's
+    threaded map of a Function with unmapped inputs costs ten times the work here)."""
+    if threads > 1:
+        return f.map(int(width), "thread", int(threads)), False
+    return f.map(f"{f.name()}_{int(width)}", "serial", int(width), [0, 2], []), True
+
+
+class _FusedStep:
+    """The clamped step (:func:`_clamped_step`) mapped over the pool's columns."""
+
+    def __init__(self, fm: ca.Function, single: bool, model: Model, width: int) -> None:
+        p = model.p if single else np.tile(model.p[:, None], (1, width))
+        self.ev = FastFn(fm, fixed=(p,))
+        self.single, self.width, self.nx = single, width, model.nx
+
+    def __call__(self, qa: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        q = qa if self.single else np.tile(np.asarray(qa, float)[:, None], (1, self.width))
+        xn, r = self.ev(q, X)
+        return xn.reshape((self.width, self.nx)).T.copy(), r.copy()
+
+
+class _SplitStep:
+    """The clamped step with the closure and its Jacobian mapped in CasADi and the linear
+    solves in numpy (large systems, see :data:`FUSED_MAX`); returns the new columns and
+    max |Phi| at the given ones (a converged column moves by one more Newton step)."""
+
+    def __init__(self, fm: ca.Function, single: bool, model: Model, width: int,
+                 step_max: float) -> None:
+        p = model.p if single else np.tile(model.p[:, None], (1, width))
+        self.ev = FastFn(fm, fixed=(p,))
+        self.single, self.width = single, width
+        self.scale = model.x_scale
+        self.square = model.m == model.nx
+        self.S = step_max
+        self.F = np.empty((width, model.m))
+        self.J = np.empty((width, model.m, model.nx))
+
+    def __call__(self, qa: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        Xr = np.ascontiguousarray(X.T)
+        qa = np.asarray(qa, dtype=float)
+        q = qa if self.single else np.ascontiguousarray(np.tile(qa, (self.width, 1)))
+        self.ev.into([q, Xr], [self.F, self.J])
+        F, J = self.F, self.J
+        r = np.max(np.abs(F), axis=1) if F.shape[1] else np.zeros(F.shape[0])
+        if self.square:
+            dx = -_enum.solve_rows(J, F)
+        else:
+            dx = -_enum.solve_rows(np.einsum("kmi,kmj->kij", J, J),
+                                   np.einsum("kmi,km->ki", J, F))
+        nrm = np.linalg.norm(dx / self.scale, axis=1)
+        dx *= np.minimum(1.0, self.S / (nrm + 1e-300))[:, None]
+        return (Xr + dx).T, r
+
+
+def _step_function(model: Model, split: bool, step_max: float, k: int,
+                   jit: bool | str) -> tuple[ca.Function, bool]:
+    """The step Function of the topology (compiled as ``jit`` says) and whether compiled.
+
+    The interpreted Function and, once built or loaded, the compiled one are kept per
+    topology; a library missing from the disk cache (``jit="cached"``) is looked for again
+    by a later call, a build that failed is not tried again.
+    """
+    from ..model import compiled as cc
+
+    def build() -> dict[str, Any]:
+        if split:
+            qa, x, p, phi = model.symbols
+            Wt = ca.densify(ca.jacobian(phi, x)).T
+            f = ca.Function("closure_jacobian", [qa, x, p], [phi, Wt])
+            tag = f"enum:{model.topology.key}:jacobian"
+        else:
+            f = _clamped_step(model, step_max, k)
+            tag = f"enum:{model.topology.key}:{k}:{step_max!r}"
+        return {"f": f, "tag": tag, "lib": None, "failed": False}
+
+    entry = model.cached(("enumeration:step", split, float(step_max), int(k)), build)
+    if jit and entry["lib"] is None and not entry["failed"]:
+        lib = cc.library(entry["tag"], [entry["f"]], build=jit is True)
+        if lib is not None:
+            entry["lib"] = lib[entry["f"].name()]
+        elif jit is True:
+            entry["failed"] = True
+            _no_compiler_warning()
+    if jit and entry["lib"] is not None:
+        return entry["lib"], True
+    return entry["f"], False
 
 
 def _mapped_step(model: Model, width: int, step_max: float, k: int, jit: bool | str,
                  threads: int):
-    """The clamped step mapped over ``width`` columns, cached; (Function, setup s, compiled).
+    """The clamped step mapped over ``width`` columns; (step, setup s, compiled, unroll).
 
-    ``jit=True`` compiles the step to C (through :func:`optkin.model.compiled.library`, so
-    the shared library is cached on disk and later processes load it in milliseconds);
-    ``"cached"`` uses a compiled step only when it is already in the disk cache.
+    Built once per topology (the geometry is an input). ``jit=True`` compiles it to C
+    (through :func:`optkin.model.compiled.library`, so the shared library is cached on
+    disk and later processes load it in milliseconds); ``"cached"`` uses a compiled step
+    only when it is already in the disk cache.
     """
-    key = (model.mech.key, width, float(step_max), int(k), jit, int(threads))
-    hit = _STEPS.get(key)
-    if hit is not None:
-        return hit[0], 0.0, hit[2]
     t0 = time.perf_counter()
-    f = _clamped_step(model, step_max, k)
-    compiled = False
-    if jit:
-        from ..model import compiled as cc
-
-        lib = cc.library(f"enum:{model.mech.key}:{k}:{step_max!r}", [f], build=jit is True)
-        if lib is not None:
-            f = lib[f.name()]
-            compiled = True
-        elif jit is True:
-            warnings.warn("assembly_modes: no compiled step (no C compiler, or compiling is "
-                          "off: OPTKIN_COMPILE); using the CasADi virtual machine (slower)",
-                          stacklevel=3)
-    fm = f.map(width, "thread", threads) if threads > 1 else f.map(width)
-    setup = time.perf_counter() - t0
-    _STEPS[key] = (fm, setup, compiled)
-    return fm, setup, compiled
+    split = model.nx > FUSED_MAX
+    f, compiled = _step_function(model, split, step_max, k, jit)
+    if width <= _CACHED_WIDTH:
+        fm, single = model.cached(("enumeration:map", split, float(step_max), int(k),
+                                   compiled, int(width), int(threads)),
+                                  lambda: _mapped(model, f, width, threads))
+    else:  # a wide map holds the geometry for every column: not kept
+        fm, single = _mapped(model, f, width, threads)
+    if split:
+        step: Any = _SplitStep(fm, single, model, width, step_max)
+    else:
+        step = _FusedStep(fm, single, model, width)
+    return step, time.perf_counter() - t0, compiled, (1 if split else k)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -451,32 +461,14 @@ def _mapped_step(model: Model, width: int, step_max: float, k: int, jit: bool | 
 
 
 def _scaled_dist(model: Model, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
-    """max-norm scaled distances between the columns of X (nx, n) and Y (nx, k), (n, k):
-    angles modulo 2 pi, a quaternion and its negative the same rotation."""
-    if Y.shape[1] == 0 or X.shape[1] == 0:
-        return np.full((X.shape[1], Y.shape[1]), np.inf)
-    s = model.x_scale[:, None, None]
-    D = (X[:, :, None] - Y[:, None, :])
-    ang = model.x_angle
-    if ang.any():
-        D[ang] = wrap_angle(D[ang])
-    D = np.abs(D) / s
-    if model.mech.kind == "legs" and model.mech.platform == "spatial":
-        D2 = np.abs(X[3:7, :, None] + Y[3:7, None, :]) / s[3:7]
-        d_pos = D[:3].max(axis=0)
-        return np.maximum(d_pos, np.minimum(D[3:7].max(axis=0), D2.max(axis=0)))
-    return D.max(axis=0)
+    """max-norm scaled distances between the assembly modes of the columns of X (nx, n) and
+    Y (nx, k), (n, k): angles modulo 2 pi, a quaternion and its negative the same rotation
+    (:func:`optkin.model.enumeration.scaled_distances`)."""
+    return _enum.scaled_distances(model, X, Y)
 
 
 def _canon(model: Model, X: np.ndarray) -> np.ndarray:
-    X = np.array(X, dtype=float)
-    if model.x_angle.any():
-        X[model.x_angle] = wrap_angle(X[model.x_angle])
-    if model.mech.kind == "legs" and model.mech.platform == "spatial":
-        q = X[3:7] / np.linalg.norm(X[3:7], axis=0)
-        X[3:7] = q * np.where(q[0] < 0, -1.0, 1.0)
-    return X
-
+    return _enum.canonical_columns(model, X)
 
 # ---------------------------------------------------------------------------------------------
 # inputs, memory
@@ -500,11 +492,22 @@ MAX_WIDTH = 1 << 16
 _COST_COLUMN = (200.0, 160.0)
 _COST_START = (6000.0, 400.0)
 _COST_STALLED = (200.0, 8.0)
+# A column of the mapped step also holds the geometry (an input of the topology's Function:
+# CasADi's map repeats it for every column, its values and sparsity): 40 bytes per entry
+# of p measured (4.8 KB a column for a 3-RPR, 14 KB for a Stewart-Gough platform); and,
+# above FUSED_MAX unknowns, the Jacobians of the numpy solves, 48 bytes per entry of W_p
+# (25 KB a column for a 3-UPU in chain form).
+_COST_GEOMETRY = 40.0
+_COST_JACOBIAN = 48.0
 
 
 def _assembly_costs(model: Model) -> tuple[float, float, float]:
     nx = model.nx
-    return tuple(a + b * nx for a, b in (_COST_COLUMN, _COST_START, _COST_STALLED))
+    col, start, stalled = (a + b * nx for a, b in (_COST_COLUMN, _COST_START, _COST_STALLED))
+    col += _COST_GEOMETRY * model.p.size
+    if nx > FUSED_MAX:
+        col += _COST_JACOBIAN * nx * model.m
+    return col, start, stalled
 
 
 def _check_size_of(model: Model, where: str) -> None:
@@ -752,8 +755,10 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     ---------------
     Checked against the budget of :mod:`optkin.limits` before anything is allocated
     (:class:`MechanismError` naming the option and its largest allowed value):
-    ``width`` costs about 200 + 160 nx bytes per column (nx unknowns; measured 285 bytes
-    for a 3-RPR, 1.1 KB for a Stewart-Gough platform) and is at most :data:`MAX_WIDTH`;
+    ``width`` costs about 200 + 160 nx + 40 np bytes per column (nx unknowns, np entries
+    of the geometry vector, which the mapped step takes as an input; 48 nx m more above
+    :data:`FUSED_MAX` unknowns; measured 4.8 KB for a 3-RPR, 14 KB for a Stewart-Gough
+    platform) and is at most :data:`MAX_WIDTH`;
     without a known ``bound`` (Khalil mechanisms, ``bound=None``), ``starts`` costs about
     6000 + 400 nx bytes per start, since on a continuum of configurations every start
     becomes a solution of its own (its column, KinResult and JSON: 1.7 KB + 4.7 KB
@@ -809,6 +814,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     nx = model.nx
     bound = known_bound(mech) if o["bound"] == "auto" else o["bound"]
     small = nx < 6
+    split = nx > FUSED_MAX  # closure and Jacobian in CasADi, the solves in numpy
     width = o["width"]
     if width == "auto":
         width = 64 if small else 256
@@ -842,7 +848,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     check_sizes("assembly_modes", *sizes, fixed=kept)
     checkpoint()  # validation stops here: every argument is checked
 
-    starts = _Starts(model, qa, int(seed), width)
+    starts = _Starts(model, qa, int(seed), width, jit)
     info: dict[str, Any] = {"bound": bound, "width": width}
     if starts.empty_reason is not None:
         info.update({"success": False, "status": "infeasible",
@@ -856,10 +862,12 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
 
     step_max = o["step_max"]
     if step_max == "auto":
-        step_max = 1.0 if small else 0.3
-    fmap, setup, compiled = _mapped_step(model, width, float(step_max), unroll, jit, threads)
+        step_max = 1.0 if small or split else 0.3
+    step, setup, compiled, unroll = _mapped_step(model, width, float(step_max), unroll, jit,
+                                                 threads)
+    if split:  # legs in chain form: about twice the iterations of the reduced closures
+        max_iter *= 2
     t0 = timer()
-    QA = qa  # broadcast by the map to every column
     issued = min(width, budget)
     X = starts.take(width)
     live = np.zeros(width, dtype=bool)
@@ -882,9 +890,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     big = 1e3 * model.x_scale[:, None]
     stop = None
     while True:
-        Xn, r = fmap(QA, X)
-        Xn = Xn.full()
-        r = r.full().ravel()
+        Xn, r = step(qa, X)
         total_iter += unroll * int(live.sum())
         it += unroll
         finite = np.all(np.isfinite(Xn), axis=0)
@@ -996,7 +1002,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             if sols.n and _nearest(model, _canon(model, x0[:, None]), sols.view())[1][0] < 1e-3:
                 continue
             tried += 1
-            sol = solver(x0=x0, p=np.concatenate([qa, x0]), lbg=0, ubg=0)
+            sol = solver(x0=x0, p=np.concatenate([qa, x0, model.p]), lbg=0, ubg=0)
             x1, res1, _, ok = newton(model, qa, np.array(sol["x"]).ravel(), tol, 8)
             if not ok:
                 continue
@@ -1017,13 +1023,13 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     elapsed = timer() - t_start
     out: list[KinResult] = []
     for k in order:
-        x = sols[:, k]
+        # polished to round-off: a residual at tol leaves the pose off by cond(W_p) tol
+        x, _, nit, ok = newton(model, qa, sols[:, k], tol, 5)
         stats = SolverStats("newton-multistart", setup, t_newton, first_nit[k], "converged",
                             {"hits": hits[k], "jit": compiled})
         kr = make_result(model, qa, x, tol, first_nit[k], stats)
-        if not kr.success:  # polish (never expected: converged columns are at tol)
-            x, _, nit, _ = newton(model, qa, x, tol, 5)
-            kr = make_result(model, qa, x, tol, first_nit[k] + nit, stats)
+        if not kr.success:  # the polish failed (never expected: converged columns are at tol)
+            kr = make_result(model, qa, sols[:, k], tol, first_nit[k], stats)
         out.append(kr)
     hits_sorted = [hits[k] for k in order]
     gt = _good_turing(hits_sorted, done)
@@ -1092,23 +1098,7 @@ def _jac_np(model: Model, qa: np.ndarray, x: np.ndarray):
     available) evaluator."""
     ev = model.fast("W")
     out = ev(np.asarray(qa, dtype=float), np.asarray(x, dtype=float))
-    pat = _PATTERNS.get(model.mech.key)
-    if pat is None:
-        pat = []
-        for i in (1, 2):
-            sp = ev.f.sparsity_out(i)
-            cols = np.repeat(np.arange(sp.size2()), np.diff(np.array(sp.colind(), dtype=int)))
-            pat.append(((sp.size1(), sp.size2()), np.array(sp.row(), dtype=int), cols))
-        _PATTERNS[model.mech.key] = pat
-    mats = []
-    for (shape, rows, cols), v in zip(pat, out[1:3]):
-        M = np.zeros(shape)
-        M[rows, cols] = v
-        mats.append(M)
-    return out[0].copy(), mats[0], mats[1]
-
-
-_PATTERNS: dict[str, list] = {}  # sparsity of W_p, W_a per mechanism
+    return out[0].copy(), ev.dense(1), ev.dense(2)
 
 
 def _corrector(model: Model, qa: np.ndarray, x: np.ndarray, tol: float, max_iter: int,
@@ -1388,10 +1378,6 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
 # working modes
 # ---------------------------------------------------------------------------------------------
 
-_B_SIGNS = {"RPR": (-1,), "UPS": (-1,), "SPS": (-1,), "RRR": (-1, 1), "RUS": (-1, 1),
-            "RSS": (-1, 1)}
-
-
 @dataclass
 class WorkingModes:
     """The working modes of a fully parallel mechanism (Chablat and Wenger, Definition 4).
@@ -1399,11 +1385,13 @@ class WorkingModes:
     Attributes
     ----------
     modes : list of tuple
-        Every sign pattern of (B_11, ..., B_nn) the legs allow: 2 signs for a leg whose
-        actuated joint is a revolute (RRR, RUS, RSS: elbow up or down), 1 for a prismatic
-        leg (B_jj = -1 for f_j = |P_j - A_j| - rho_j).
+        Every sign pattern of (B_11, ..., B_nn) the legs allow, in the model's order
+        (:meth:`optkin.model.Model.working_modes`: +1 before -1, the first leg slowest): 2
+        signs for a leg whose actuated joint moves the centre of its distance constraint
+        (RRR, RUS, RSS, PRR: elbow up or down), 1 for a leg whose actuated joint is the
+        distance (B_jj = -1 for f_j = |P_j - A_j| - rho_j).
     legs : list of str
-        The leg types.
+        The leg types (or joint strings of chains).
     pose : ndarray or None
         The pose at which existence was checked.
     existing : dict or None
@@ -1432,13 +1420,8 @@ class WorkingModes:
         return f"WorkingModes({self.summary()})"
 
     def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "count": len(self.modes),
-            "modes": [list(m) for m in self.modes],
-            "legs": list(self.legs),
-            "summary": self.summary(),
-            "success": True,
-        }
+        out: dict[str, Any] = dict(count=len(self.modes), modes=[list(m) for m in self.modes],
+                                   legs=list(self.legs), summary=self.summary(), success=True)
         if self.existing is not None:
             out["pose"] = None if self.pose is None else np.asarray(self.pose).tolist()
             out["existing"] = [list(m) for m in self.existing]
@@ -1471,17 +1454,18 @@ def working_modes(mech: Mechanism, pose: Any = None) -> WorkingModes:
     (4, 4)
     """
     check_mechanism(mech, "working_modes")
-    if mech.kind != "legs":
+    model = get_model(mech)
+    if model.working_mode_signs is None:
         raise MechanismError(
             f"{mech.name}: working modes are defined for fully parallel mechanisms (one "
-            "actuated joint per independent leg, seed 004); describe it with "
-            "Mechanism.from_legs"
+            "actuated joint per independent leg, each leg a distance constraint whose "
+            "closure row B = W_a is diagonal, seed 004); describe it with "
+            "Mechanism.from_legs and distance legs"
         )
     if pose is None:
         checkpoint()  # validation stops here: every argument is checked
-    signs = [_B_SIGNS.get(leg.type, (-1, 1)) for leg in mech.legs]
-    modes = [tuple(int(v) for v in m) for m in itertools.product(*signs)]
-    wm = WorkingModes(modes, [leg.type for leg in mech.legs])
+    modes = [tuple(int(v) for v in m) for m in model.working_modes()]
+    wm = WorkingModes(modes, list(model.leg_labels))
     if pose is not None:
         from .inverse import inverse
 

@@ -97,14 +97,22 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
             QA, Q, V = (np.array(v) for v in part.fn(xplat, model.p))
             sols = []
             rev = np.array(mech.revolute, dtype=bool)[part.q]
+            act_q = np.flatnonzero(np.array(mech.actuated, dtype=bool))  # q index of each q_a
+            rev_a = np.array(mech.revolute, dtype=bool)[act_q[list(part.qa)]]
+            drivers: list[np.ndarray] = []
             for b in range(part.branches):
                 if V[b, 0] < 0.5 or not np.all(np.isfinite(Q[b])):
                     continue
                 qb = np.where(rev, wrap_angle(Q[b]), Q[b])
-                # the two branches of a stretched leg meet (a double root: sqrt(eps) apart)
-                if any(np.max(np.abs(np.where(rev, wrap_angle(qb - s_), (qb - s_) / model.length)))
-                       < 1e-7 for s_ in sols):
+                # the branches are the two roots of the leg's driver: when they meet (a
+                # stretched leg, a double root sqrt(eps) apart) they are one posture, even
+                # where the passive angles derived from it differ (a universal joint at
+                # its gimbal lock reads either of two equal configurations)
+                d = np.atleast_1d(QA[b]).astype(float)
+                if any(np.max(np.abs(np.where(rev_a, wrap_angle(d - d_), (d - d_) / model.length)),
+                              initial=0.0) < 1e-7 for d_ in drivers):
                     continue
+                drivers.append(d)
                 sols.append(qb)
             if not sols:
                 label = model.leg_labels[part.leg]
