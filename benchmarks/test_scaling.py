@@ -147,7 +147,8 @@ _VOLATILE = {"time", "elapsed", "created", "host", "pid", "started", "finished",
 
 def _strip(obj):
     if isinstance(obj, dict):
-        return {k: _strip(v) for k, v in obj.items() if k not in _VOLATILE}
+        return {k: _strip(v) for k, v in obj.items()
+                if k not in _VOLATILE and not k.endswith("_time")}
     if isinstance(obj, list):
         return [_strip(v) for v in obj]
     if isinstance(obj, float):

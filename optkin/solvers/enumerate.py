@@ -140,7 +140,8 @@ ASSEMBLY_DEFAULTS: dict[str, Any] = {
     "dedup_tol": 1e-6,  # scaled distance under which two solutions are the same
     "rescue": 8,  # IPOPT rescues of stalled starts
     "jit": "auto",  # compile the step to C: True, False, "auto" (6+ unknowns, or if cached)
-    "threads": 2,  # threads of the mapped step
+    "threads": 1,  # threads of the mapped step (more repeat the geometry in every column:
+    # slower than one on the 2-core machine measured; batch runs parallelize by worker)
 }
 
 #: Options of :func:`track` and their defaults.
