@@ -202,14 +202,16 @@ class SolutionSet(Sequence):
         return iter(self._sols)
 
     def summary(self) -> str:
-        near = sum(1 for s in self._sols if np.isfinite(s.cond) and s.cond > 1e8)
+        near = sum(1 for s in self._sols if s.cond > 1e8)  # inf: singular (NaN: not known)
         return f"{len(self._sols)} {self.kind}, {near} near-singular"
 
     def __repr__(self) -> str:
         return f"SolutionSet({self.summary()})"
 
     def nonsingular(self, max_cond: float = 1e8) -> SolutionSet:
-        """The solutions whose condition number of W_p is at most ``max_cond``."""
+        """The solutions whose condition number of W_p is at most ``max_cond`` (a singular
+        one, ``cond = inf``, never is; one whose condition number was not computed, NaN, is
+        kept)."""
         try:
             max_cond = float(max_cond)
         except (TypeError, ValueError):
@@ -219,7 +221,7 @@ class SolutionSet(Sequence):
 
             raise MechanismError(f"max_cond: expected a number >= 1 (a condition number), got "
                                  f"{max_cond!r}")
-        keep = [s for s in self._sols if not (np.isfinite(s.cond) and s.cond > max_cond)]
+        keep = [s for s in self._sols if not s.cond > max_cond]
         return SolutionSet(keep, self.kind, self.info, self.seed)
 
     def closest_to(self, q: Sequence[float]) -> KinResult:

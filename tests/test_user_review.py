@@ -612,3 +612,21 @@ def test_khalil_home_must_be_finite_joint_values(home):
     with pytest.raises(MechanismError, match=r"^home: expected 1 finite joint values \['t1'\]"):
         optkin.Mechanism.from_khalil([row], home=home)
     assert optkin.Mechanism.from_khalil([row], home={"t1": 0.2}).home.tolist() == [0.2]
+
+
+def test_nonsingular_drops_singular_solutions(rpr3, closed):
+    """A solution with an infinite condition number (W_p singular) is not nonsingular and is
+    counted near-singular; NaN (not computed) is kept."""
+    import dataclasses
+
+    from optkin.results import SolutionSet
+
+    s = optkin.assembly_modes(rpr3, closed.qa)
+    assert len(s) >= 2 and all(np.isfinite(r.cond) for r in s)
+    sols = list(s)
+    sols[0] = dataclasses.replace(sols[0], cond=float("inf"))
+    sols[1] = dataclasses.replace(sols[1], cond=float("nan"))
+    t = SolutionSet(sols, s.kind, s.info, s.seed)
+    kept = t.nonsingular()
+    assert len(kept) == len(s) - 1 and all(not np.isinf(r.cond) for r in kept)
+    assert "1 near-singular" in t.summary()
