@@ -5,8 +5,8 @@ inverse kinematics and det A; for the aspects, connected components by scipy.ndi
 The grid only resolves the curves to its step (about 0.009 length units here); the traced
 curves are exact to 1e-9 at every point.
 
-    /work/venv/bin/python benchmarks/bench_continuation.py
-    /work/venv/bin/python -m pytest benchmarks/bench_continuation.py -m slow
+    python benchmarks/bench_continuation.py
+    python -m pytest benchmarks/bench_continuation.py -m slow
 """
 
 from __future__ import annotations

@@ -7,8 +7,8 @@ and ``capability_many`` (64 poses per parametrised LP).
 Run as a script (prints the ratio) or under pytest (``-m slow``, pytest-benchmark's
 ``extra_info`` records the times, the ratio and the statuses)::
 
-    /work/venv/bin/python benchmarks/bench_statics.py --poses 1000
-    /work/venv/bin/python -m pytest benchmarks/bench_statics.py -m slow
+    python benchmarks/bench_statics.py --poses 1000
+    python -m pytest benchmarks/bench_statics.py -m slow
 """
 
 from __future__ import annotations

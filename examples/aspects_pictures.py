@@ -1,6 +1,6 @@
 """Pictures of singular loci traced by continuation, working modes and aspects (PNG).
 
-    /work/venv/bin/python examples/aspects_pictures.py [out_dir]   # default docs/pictures
+    python examples/aspects_pictures.py [out_dir]   # default docs/pictures
 
 1. The five-bar of Chablat & Wenger (seed 004: L0 = 9, L1 = 8, L2 = 5, L3 = 5, L4 = 8):
    parallel (red) and serial (blue) singular curves in the joint space and in the

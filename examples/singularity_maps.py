@@ -1,6 +1,6 @@
 """Singularity pictures: distance-to-singularity maps over 2-D slices (PNG).
 
-    /work/venv/bin/python examples/singularity_maps.py [out_dir]   # default docs/pictures
+    python examples/singularity_maps.py [out_dir]   # default docs/pictures
 
 1. The five-bar of Chablat & Wenger (seed 004: L0 = 9, L1 = 8, L2 = 5, L3 = 5, L4 = 8) over
    its workspace (x, y) in the working mode of the first posture found: log10 of

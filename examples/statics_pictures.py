@@ -1,6 +1,6 @@
 """Statics pictures: a capability polygon and a wrench-feasible workspace map (PNG).
 
-    /work/venv/bin/python examples/statics_pictures.py [out_dir]   # default docs/pictures
+    python examples/statics_pictures.py [out_dir]   # default docs/pictures
 
 1. The force capability polygon (fx, fy at zero moment) of the redundantly actuated 4-RPR
    of problems/rpr4.toml at the pose (2.1, 1.4, -0.25), legs limited to |tau_i| <= 100:

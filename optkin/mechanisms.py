@@ -451,6 +451,12 @@ def _circle(radius: float, angles: np.ndarray) -> np.ndarray:
     return np.c_[radius * np.cos(angles), radius * np.sin(angles), np.zeros(len(angles))]
 
 
+def _triad() -> tuple[np.ndarray, np.ndarray]:
+    """Radial and tangent unit vectors (3, 3) at 0, 120 and 240 degrees in the xy-plane."""
+    a = 2 * np.pi * np.arange(3) / 3
+    return (np.c_[np.cos(a), np.sin(a), np.zeros(3)], np.c_[-np.sin(a), np.cos(a), np.zeros(3)])
+
+
 def upu3(base_radius: float = 1.0, platform_radius: float = 0.5) -> Mechanism:
     """Tsai's 3-UPU translational manipulator (Tsai, ARK 1996).
 
@@ -476,9 +482,7 @@ def upu3(base_radius: float = 1.0, platform_radius: float = 0.5) -> Mechanism:
     """
     R = _positive("base_radius", base_radius)
     r = _positive("platform_radius", platform_radius)
-    a = 2 * np.pi * np.arange(3) / 3
-    u = np.c_[np.cos(a), np.sin(a), np.zeros(3)]
-    t = np.c_[-np.sin(a), np.cos(a), np.zeros(3)]
+    u, t = _triad()
     legs = [{"type": "UPU", "base": (R * u[i]).tolist(), "platform": (r * u[i]).tolist(),
              "axis": t[i].tolist(), "arm": (-u[i]).tolist()} for i in range(3)]
     return Mechanism.from_legs(legs, "spatial", name="3-UPU")
@@ -500,9 +504,7 @@ def rps3(base_radius: float = 1.0, platform_radius: float = 0.5) -> Mechanism:
     """
     R = _positive("base_radius", base_radius)
     r = _positive("platform_radius", platform_radius)
-    a = 2 * np.pi * np.arange(3) / 3
-    u = np.c_[np.cos(a), np.sin(a), np.zeros(3)]
-    t = np.c_[-np.sin(a), np.cos(a), np.zeros(3)]
+    u, t = _triad()
     legs = [{"type": "RPS", "base": (R * u[i]).tolist(), "platform": (r * u[i]).tolist(),
              "axis": t[i].tolist()} for i in range(3)]
     return Mechanism.from_legs(legs, "spatial", name="3-RPS")

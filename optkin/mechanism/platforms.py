@@ -146,7 +146,23 @@ class Planar(Platform):
         return cls.x_from_pose(T)
 
 
-class PlanarPoint(Platform):
+class _Translating(Platform):
+    """A platform that only translates: its coordinates are its origin's."""
+
+    @classmethod
+    def x_from_pose(cls, T):
+        return np.asarray(T, dtype=float)[:cls.space_dim, 3].copy()
+
+    @classmethod
+    def task_to_pose(cls, t):
+        return homogeneous(np.eye(cls.space_dim), t[:cls.space_dim])
+
+    @classmethod
+    def pose_to_task(cls, T):
+        return cls.x_from_pose(T)
+
+
+class PlanarPoint(_Translating):
     name = "planar_point"
     space_dim = 2
     dof = 2
@@ -159,19 +175,6 @@ class PlanarPoint(Platform):
     frame_rows = (0, 1, 5)  # a leg's last joint keeps a fictitious orientation 0
     rotates = False
     shared_point = True
-
-
-    @classmethod
-    def x_from_pose(cls, T):
-        return np.asarray(T, dtype=float)[:2, 3].copy()
-
-    @classmethod
-    def task_to_pose(cls, t):
-        return homogeneous(np.eye(2), t[:2])
-
-    @classmethod
-    def pose_to_task(cls, T):
-        return cls.x_from_pose(T)
 
 
 class Spatial(Platform):
@@ -220,7 +223,7 @@ class Spatial(Platform):
         return E
 
 
-class SpatialTranslational(Platform):
+class SpatialTranslational(_Translating):
     name = "spatial_translational"
     space_dim = 3
     dof = 3
@@ -230,19 +233,6 @@ class SpatialTranslational(Platform):
     task = ("x", "y", "z")
     twist_rows = (0, 1, 2)
     rotates = False
-
-
-    @classmethod
-    def x_from_pose(cls, T):
-        return np.asarray(T, dtype=float)[:3, 3].copy()
-
-    @classmethod
-    def task_to_pose(cls, t):
-        return homogeneous(np.eye(3), t[:3])
-
-    @classmethod
-    def pose_to_task(cls, T):
-        return cls.x_from_pose(T)
 
 
 #: Platform kind name -> class.
