@@ -441,7 +441,7 @@ def run_task_record(mech: Any, task: Any, i: int, ctx: TaskContext) -> dict[str,
         message = "; ".join(
             f"expected {c['check']} = {_fmt(c['want'])}, got {c['got']}" for c in failed
         )
-    return clean_json({
+    record = clean_json({
         "index": i,
         "kind": task.kind,  # type: ignore[attr-defined]
         "name": task.name,
@@ -451,10 +451,12 @@ def run_task_record(mech: Any, task: Any, i: int, ctx: TaskContext) -> dict[str,
         "time": elapsed,
         "params": task.model_dump(exclude={"expected"}, exclude_none=True),
         "expected": exp,
-        "output": output,
+        "output": None,
         "pictures": pictures,
         "notes": ctx.notes,
     })
+    record["output"] = output  # already clean: not walked twice
+    return record
 
 
 def run_problem(
@@ -506,7 +508,7 @@ def run_problem(
             on_task_done(i, rec)
         tasks_out.append(rec)
     mech_echo = mech.to_dict() if hasattr(mech, "to_dict") else None
-    return clean_json({
+    result = clean_json({
         "result_format": RESULT_FORMAT,
         "complete": not any(t.get("abandoned") for t in tasks_out),
         "problem": problem.display,
@@ -523,9 +525,11 @@ def run_problem(
         "input": problem.document,
         "mechanism": mech_echo,
         "mechanism_key": getattr(mech, "key", None),
-        "tasks": tasks_out,
+        "tasks": [],
         "passed": all(t["passed"] for t in tasks_out),
     })
+    result["tasks"] = tasks_out  # records are clean already (run_task_record)
+    return result
 
 
 def _load_any(data: bytes, display: str, source: str) -> Problem:
@@ -639,7 +643,10 @@ def _write_result(out: Path, info: ProblemFileInfo, result: dict[str, Any],
     rel_dir = info.result_path(out).parent
     for name, data in pictures.items():
         atomic_write(rel_dir / Path(name).name, data)
-    blob = json.dumps(clean_json(result), indent=1, sort_keys=False, allow_nan=False)
+    try:  # results come clean from the workers; clean them here only when they are not
+        blob = json.dumps(result, indent=1, sort_keys=False, allow_nan=False)
+    except (TypeError, ValueError):
+        blob = json.dumps(clean_json(result), indent=1, sort_keys=False, allow_nan=False)
     atomic_write(info.result_path(out), blob.encode("utf-8"))
 
 

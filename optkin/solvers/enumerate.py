@@ -84,7 +84,7 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
-from scipy.stats import chi2, qmc
+from scipy.special import gammaincinv
 
 from .._checks import MAX_ABS, as_float, as_int, as_matrix, as_vector
 from .._dryrun import checkpoint
@@ -114,6 +114,7 @@ from .common import (
     parse_guess,
     timer,
 )
+from .sobol import sobol_points
 
 __all__ = [
     "assembly_modes",
@@ -198,7 +199,6 @@ class _ShiftedSobol:
         self.dim = dim
         self.shift = np.random.default_rng(seed).random(dim)
         self.pos = 0
-        self.engine: qmc.Sobol | None = None
 
     def random(self, n: int) -> np.ndarray:
         if self.dim == 0:
@@ -208,18 +208,11 @@ class _ShiftedSobol:
             base = _SOBOL.get(self.dim)
             if base is None or base.shape[0] < need:
                 m = max(1024, 1 << int(np.ceil(np.log2(need))))
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    base = qmc.Sobol(self.dim, scramble=False).random(m)
+                base = sobol_points(self.dim, m)
                 _SOBOL[self.dim] = base
             U = base[self.pos:need] + self.shift
-        else:  # past the cached points: the same sequence from an engine of its own
-            if self.engine is None:
-                self.engine = qmc.Sobol(self.dim, scramble=False)
-                self.engine.fast_forward(self.pos)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                U = self.engine.random(n) + self.shift
+        else:  # past the cached points: the same sequence, generated for this run
+            U = sobol_points(self.dim, n, start=self.pos) + self.shift
         self.pos = need
         return U - np.floor(U)
 
@@ -700,7 +693,9 @@ def _nn_update(model: Model, Y: np.ndarray, s0: int, nn: np.ndarray) -> np.ndarr
 
 #: One-sided confidence level of ``p_new_upper`` (see the module docstring for why 99 %).
 P_NEW_CONFIDENCE = 0.99
-_POISSON_UPPER = chi2.ppf(P_NEW_CONFIDENCE, 2 * np.arange(129) + 2) / 2
+# chi2.ppf(p, 2k + 2) / 2 = gammaincinv(k + 1, p): the chi-squared law with 2k + 2 degrees of
+# freedom is a gamma law of shape k + 1 and scale 2.
+_POISSON_UPPER = gammaincinv(np.arange(129) + 1.0, P_NEW_CONFIDENCE)
 
 
 def poisson_upper(k: int) -> float:
@@ -709,7 +704,7 @@ def poisson_upper(k: int) -> float:
     k = int(k)
     if k < _POISSON_UPPER.size:
         return float(_POISSON_UPPER[k])
-    return float(chi2.ppf(P_NEW_CONFIDENCE, 2 * k + 2) / 2)
+    return float(gammaincinv(k + 1.0, P_NEW_CONFIDENCE))
 
 
 def _good_turing(hits: Sequence[int], starts: int) -> dict[str, Any]:

@@ -14,7 +14,6 @@ import itertools
 from typing import Any
 
 import numpy as np
-from scipy.stats import qmc
 
 from .._dryrun import checkpoint
 from ..errors import MechanismError
@@ -26,6 +25,7 @@ from ..model import Model, get_model
 from ..model.inverse import ClosedPart, SearchPart
 from ..results import KinResult, SolutionSet, SolverStats
 from .common import count_option, make_result, merge_options, newton, timer
+from .enumerate import _sobol
 
 __all__ = ["inverse", "INVERSE_DEFAULTS", "distinct"]
 
@@ -265,7 +265,7 @@ def _multistart(model: Model, step, param: np.ndarray, lo, hi, n: int, iters: in
     The iterations stop early when ``deadline`` expires (the residuals say what converged).
     """
     dim = len(lo)
-    U = qmc.Sobol(dim, scramble=True, seed=seed).random(n)
+    U = _sobol(dim, seed).random(n)
     Z = (lo + U * (hi - lo)).T
     fmap = model.cached(("inverse_map", step.name(), n, step.is_a("External")),
                         lambda: step.map(f"{step.name()}_{n}", "serial", n, [1, 2], []))
