@@ -103,7 +103,31 @@ def _progress_factory(enabled: bool):
     return make
 
 
+def _count_toml(paths: Sequence[str], most: int) -> int:
+    """How many ``*.toml`` files the paths hold, counting no further than ``most``."""
+    n = 0
+    for p in map(Path, paths):
+        try:
+            if p.is_file():
+                n += 1
+            elif p.is_dir():
+                for _ in p.rglob("*.toml"):
+                    n += 1
+                    if n >= most:
+                        break
+        except OSError:
+            continue
+        if n >= most:
+            break
+    return n
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
+    if not args.scheduler and isinstance(args.jobs, int) and args.jobs >= 1:
+        # the workers start while this process imports the runner and reads the files
+        from optkin.problems.workers import prestart
+
+        prestart(_count_toml(args.paths, args.jobs), threads=1 if args.jobs > 1 else None)
     from optkin.problems.runner import find_problem_files, run_paths
 
     if not find_problem_files(args.paths):

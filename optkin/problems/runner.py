@@ -917,24 +917,21 @@ def _dask_client(address: str) -> Any:
                            "address of a Dask scheduler (e.g. tcp://host:8786)")
 
 
-def _isolated_job(spec: dict[str, Any], time_limit: float) -> dict[str, Any]:
-    """Dask task: run one problem in a worker process of this Dask worker."""
-    box: dict[str, Any] = {}
-    job = Job(spec["display"], spec)
-    run_jobs([job], n_workers=1, time_limit=time_limit, threads=1,
-             on_outcome=lambda o: box.update(outcome=o))
-    o = box["outcome"]
-    return {"kind": o.kind, "result": o.result, "pictures": o.pictures, "message": o.message}
-
-
 def _run_dask(address: str, jobs: list[Job], time_limit: float,
               done: Callable[[JobOutcome], None]) -> None:
     client = _dask_client(address)
     try:
         from distributed import as_completed
 
+        from optkin.problems.dask_worker import PrestartWorkers, run_unit
+
+        # every Dask worker starts its optkin worker processes now, while the tasks are
+        # sent (and keeps them for later runs); a worker that cannot is served as before
+        with contextlib.suppress(Exception):
+            client.register_plugin(PrestartWorkers(), name=PrestartWorkers.name)
+
         futures = {  # the longest first, as for the local pool (jobs come sorted)
-            client.submit(_isolated_job, job.spec, time_limit,
+            client.submit(run_unit, job.spec, time_limit,
                           key=f"optkin-{input_hash(job.spec['data'])[:12]}-{i}",
                           priority=len(jobs) - i, pure=False): job
             for i, job in enumerate(jobs)

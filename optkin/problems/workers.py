@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["Job", "JobOutcome", "run_jobs", "DEFAULT_TIME_LIMIT", "MAX_TIME_LIMIT"]
+__all__ = ["Job", "JobOutcome", "run_jobs", "prestart", "DEFAULT_TIME_LIMIT", "MAX_TIME_LIMIT"]
 
 #: Seconds a task may run when neither the task (``time_limit``) nor the run
 #: (``--time-limit``) says otherwise. Loading a problem and building its model have the
@@ -294,24 +294,101 @@ _IDLE_LOCK = threading.Lock()
 MAX_IDLE = 4
 
 
+#: Variables a worker does not inherit. Dask's nanny sets ``MALLOC_TRIM_THRESHOLD_=65536``
+#: for its workers (to hand memory back to the system early); inherited by an optkin
+#: worker, it makes glibc trim the heap after nearly every numpy temporary, and the
+#: solvers ran 15-30 % slower (aspects of a five-bar: 1.03-1.13 s of CPU against
+#: 0.87-0.98 s). A worker lives for one run and gives all its memory back when it exits.
+_NOT_INHERITED = ("MALLOC_TRIM_THRESHOLD_",)
+
+
 def _worker_env(threads: int | None) -> dict[str, str]:
-    env = dict(os.environ)
+    env = {k: v for k, v in os.environ.items() if k not in _NOT_INHERITED}
     if threads is not None:  # one BLAS / OpenMP thread per worker when several run
         for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             env.setdefault(k, str(threads))
     return env
 
 
+#: Workers of each environment still starting in the background (:func:`prestart`).
+_BOOTING: dict[tuple, int] = {}
+_BOOTED = threading.Condition(_IDLE_LOCK)
+
+
 def _checkout(env: dict[str, str], events: queue.Queue) -> _Worker:
+    """An idle worker of this environment, one that :func:`prestart` is starting (waited
+    for: it is further along than a new one), or a new worker."""
+    key = _env_key(env)
+    until = time.monotonic() + _START_LIMIT
     with _IDLE_LOCK:
-        pool = _IDLE.get(_env_key(env), [])
-        while pool:
-            w = pool.pop()
-            if w.proc.poll() is None:
-                w.events = events
-                return w
-            w.close()
+        while True:
+            pool = _IDLE.get(key, [])
+            while pool:
+                w = pool.pop()
+                if w.proc.poll() is None:
+                    w.events = events
+                    return w
+                w.close()
+            left = until - time.monotonic()
+            if _BOOTING.get(key, 0) <= 0 or left <= 0:
+                break
+            _BOOTED.wait(timeout=left)
     return _Worker(env, events)
+
+
+def _mine() -> str:
+    import optkin
+
+    return str(Path(optkin.__file__).resolve().parent)
+
+
+def _boot(env: dict[str, str]) -> None:
+    """Start one worker, wait until it is ready, and keep it idle (a :func:`prestart` thread)."""
+    key = _env_key(env)
+    events: queue.Queue = queue.Queue()
+    w: _Worker | None = None
+    try:
+        w = _Worker(env, events)
+        try:
+            _, msg = events.get(timeout=_START_LIMIT)
+        except queue.Empty:
+            msg = None
+        if msg is not None and msg[0] == "ready" and msg[1].get("optkin") == _mine():
+            w.ready, w.info, w.deadline = True, msg[1], None
+        else:  # it died, hung, or imported another optkin: a run will start its own
+            w.kill()
+            w.close()
+            w = None
+    except Exception:  # noqa: BLE001 - a run that needs a worker will say why it cannot
+        w = None
+    finally:
+        with _IDLE_LOCK:
+            _BOOTING[key] = _BOOTING.get(key, 1) - 1
+            if w is not None:
+                _IDLE.setdefault(key, []).append(w)
+            _BOOTED.notify_all()
+
+
+def prestart(n: int, threads: int | None = None) -> int:
+    """Start up to ``n`` workers in the background, for a run about to begin in this process.
+
+    A worker's start-up (a Python process importing optkin, numpy, CasADi and pydantic,
+    about 0.5 s) then overlaps whatever the caller does next (the command line imports the
+    runner and reads the problem files meanwhile; a Dask worker unpickles its first task).
+    :func:`run_jobs` takes these workers (waiting for one still starting rather than
+    starting another); workers a run does not take are closed at exit like any idle worker.
+    ``threads`` as for :func:`run_jobs`. Returns the number of workers started.
+    """
+    env = _worker_env(threads)
+    key = _env_key(env)
+    with _IDLE_LOCK:
+        have = len(_IDLE.get(key, [])) + _BOOTING.get(key, 0)
+        k = max(0, int(n) - have)
+        _BOOTING[key] = _BOOTING.get(key, 0) + k
+    for _ in range(k):
+        threading.Thread(target=_boot, args=(env,), daemon=True,
+                         name="optkin-worker-start").start()
+    return k
 
 
 def _checkin(w: _Worker, env: dict[str, str], keep: int) -> None:
@@ -324,8 +401,8 @@ def _checkin(w: _Worker, env: dict[str, str], keep: int) -> None:
         if len(pool) < keep:
             pool.append(w)
             w = None
-        # beyond MAX_IDLE in all, the workers of other environments go first
-        while sum(map(len, _IDLE.values())) > MAX_IDLE:
+        # beyond MAX_IDLE in all (or the run's own count), other environments' go first
+        while sum(map(len, _IDLE.values())) > max(MAX_IDLE, keep):
             key = next(k for k, v in _IDLE.items() if v and (v is not pool or len(_IDLE) == 1))
             evicted.append(_IDLE[key].pop(0))
             if not _IDLE[key]:
@@ -349,13 +426,15 @@ def run_jobs(
     time_limit: float = DEFAULT_TIME_LIMIT,
     on_outcome: Callable[[JobOutcome], None] | None = None,
     threads: int | None = None,
+    keep: int | None = None,
 ) -> list[JobOutcome]:
     """Run ``jobs`` on up to ``n_workers`` worker processes; return their outcomes.
 
     ``time_limit`` bounds loading each problem (its tasks bring their own limits, the
     worker falling back to the run's default). A task past its limit, or a worker that
     dies, becomes an ``error`` record of that task; the problem goes on in a new worker.
-    ``on_outcome`` is called as each job ends (in the calling thread).
+    ``on_outcome`` is called as each job ends (in the calling thread). Afterwards up to
+    ``keep`` (default ``n_workers``) workers stay idle for the next call in this process.
     """
     pending: deque[Job] = deque(jobs)
     outcomes: list[JobOutcome] = []
@@ -450,9 +529,7 @@ def run_jobs(
                 continue
             tag = msg[0]
             if tag == "ready":
-                import optkin
-
-                mine = str(Path(optkin.__file__).resolve().parent)
+                mine = _mine()
                 if msg[1].get("optkin") != mine:  # never run another optkin's code
                     w.kill()
                     abandon(w, f"the worker imported optkin from {msg[1].get('optkin')}, "
@@ -491,5 +568,5 @@ def run_jobs(
             if w.job is not None:
                 w.kill()
                 w.dead = True
-            _checkin(w, env, n_workers)
+            _checkin(w, env, n_workers if keep is None else keep)
     return outcomes

@@ -1,0 +1,54 @@
+"""What runs on a Dask worker for ``optkin run --scheduler``: the task and a worker plugin.
+
+:func:`run_unit` runs one unit of work (a problem, or some of its tasks) in an optkin
+worker process of the Dask worker, under the same time limits as the local pool
+(:func:`optkin.problems.workers.run_jobs`); the worker process stays for the next unit,
+one per Dask thread. :class:`PrestartWorkers`, registered by the runner when it connects,
+starts those processes as soon as a Dask worker has the plugin, so that their start-up
+(importing optkin, numpy, CasADi and pydantic, about 0.5 s) overlaps the transfer of the
+first tasks, and they stay for later runs on the same cluster.
+
+This module imports only the standard library, :mod:`distributed` and
+:mod:`optkin.problems.workers` (itself standard library only): the Dask worker process
+itself never imports numpy, CasADi or pydantic for optkin's sake.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from distributed.diagnostics.plugin import WorkerPlugin
+
+from optkin.problems.workers import Job, prestart, run_jobs
+
+__all__ = ["PrestartWorkers", "run_unit"]
+
+
+def _threads(worker: Any = None) -> int:
+    """Threads of a Dask worker (this one by default; 1 outside a Dask worker)."""
+    try:
+        if worker is None:
+            from distributed import get_worker
+
+            worker = get_worker()
+        return max(1, int(worker.state.nthreads))
+    except Exception:  # noqa: BLE001 - not on a Dask worker, or an older distributed
+        return 1
+
+
+def run_unit(spec: dict[str, Any], time_limit: float) -> dict[str, Any]:
+    """Dask task: run one unit in an optkin worker process of this Dask worker."""
+    box: dict[str, Any] = {}
+    run_jobs([Job(spec["display"], spec)], n_workers=1, time_limit=time_limit, threads=1,
+             keep=_threads(), on_outcome=lambda o: box.update(outcome=o))
+    o = box["outcome"]
+    return {"kind": o.kind, "result": o.result, "pictures": o.pictures, "message": o.message}
+
+
+class PrestartWorkers(WorkerPlugin):
+    """Start one optkin worker process per thread of each Dask worker, in the background."""
+
+    name = "optkin-prestart-workers"
+
+    def setup(self, worker: Any) -> None:
+        prestart(_threads(worker), threads=1)
