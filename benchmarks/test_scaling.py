@@ -18,24 +18,36 @@ runs the batch in a fresh process with its own empty compiled-code cache, and so
 same batch sent to a Dask ``LocalCluster(P workers, 1 thread each)`` with ``--scheduler``.
 ``extra_info`` holds the wall times, the speed-ups over ``--jobs 1`` (the in-run baseline),
 the efficiencies, whether the results equal those of ``--jobs 1``, and the prediction of
-:func:`predict`, a model fed with what the ``--jobs 1`` run measured:
+:func:`predict`, a model fed with what the runs measured:
 
-* the task costs (the runner's per-task times in ``summary.csv``),
-* the fixed cost of a run that does not shrink with workers (start-up of the CLI, of a
-  worker and the first compilation per topology: wall time minus the task times of the
-  ``--jobs 1`` run, minus the per-unit overhead below),
-* the scheduling overhead per unit of work (measured as the wall time a run of the same
-  number of trivial problems takes per problem beyond its start-up),
+* the unit costs: each problem's ``elapsed`` in the ``--jobs 1`` run (the worker's time to
+  fetch the model and run the tasks, from the result files);
+* the warm-up of a worker: for each topology (library mechanism), the first unit's cost
+  over the median of the others, in the order the runner ran them; every worker pays it
+  for every topology it meets, so the model charges it to every worker;
+* the overhead per unit outside the worker (messages, the parent writing the result):
+  the wall time per problem of a run of 32 trivial problems beyond one of 8, minus their
+  own ``elapsed``;
+* the parent's CPU time per unit (``time.process_time`` of the command-line process over
+  the ``--jobs 1`` run, which excludes the workers): the parent handles the results one
+  after the other, so no schedule beats ``n`` times it;
+* the fixed cost: the wall time of ``--jobs 1`` minus all of the above (start-up of the
+  command line and of a worker, the summary): paid once whatever the number of workers;
 
-and predicts the makespan at P workers as the fixed cost plus the longest-processing-time
-schedule of the (bootstrapped) task costs plus overheads on P machines. Run it with
-``python -m pytest benchmarks/test_scaling.py`` (about 2-4 minutes here), or rebuild the
-batch with ``python benchmarks/test_scaling.py DIR [N]``.
+and predicts the makespan at P workers as the fixed cost plus the longer of the
+longest-processing-time schedule of the units (each worker starting with the warm-up) and
+the parent's serial share. The same model predicts the ``--jobs 2`` run measured here, and
+the closing figures give both. ``cpu_inflation`` is the measured ratio of the workers'
+summed unit costs with 2 workers to those with 1 (memory and cache shared between cores):
+the 16- and 64-worker predictions are given without it and with it.
+
+Run it with ``python -m pytest benchmarks/test_scaling.py`` (about 3-5 minutes here;
+``OPTKIN_SCALING_ROUNDS=3`` repeats the runs, interleaved, and reports medians), or rebuild
+the batch with ``python benchmarks/test_scaling.py DIR [N]``.
 """
 
 from __future__ import annotations
 
-import csv
 import heapq
 import json
 import os
@@ -121,11 +133,17 @@ def make_trivial(folder: Path, n: int) -> None:
 # Runs
 # ---------------------------------------------------------------------------------------
 
+_CLI = ("import sys, time\nfrom optkin.cli import main\nrc = main(sys.argv[1:])\n"
+        "print(f'parent-cpu {time.process_time():.6f}', file=sys.stderr)\nsys.exit(rc)\n")
+
+
 def run_batch(batch: Path, out: Path, cache: Path, jobs: int = 1,
-              scheduler: str | None = None) -> float:
-    """Wall time of ``optkin run`` on ``batch`` in a fresh process (its own cache)."""
+              scheduler: str | None = None) -> tuple[float, float]:
+    """Wall time of ``optkin run`` on ``batch`` in a fresh process (its own cache), and the
+    CPU time of that command-line process alone (not its workers)."""
     env = dict(os.environ, OPTKIN_CACHE=str(cache))
-    cmd = [sys.executable, "-m", "optkin", "run", str(batch), "--out", str(out),
+    env.pop("MALLOC_TRIM_THRESHOLD_", None)  # set in this process by a Dask LocalCluster
+    cmd = [sys.executable, "-c", _CLI, "run", str(batch), "--out", str(out),
            "--no-pictures", "-q", "--force"]
     cmd += ["--scheduler", scheduler] if scheduler else ["--jobs", str(jobs)]
     t0 = time.perf_counter()
@@ -133,12 +151,25 @@ def run_batch(batch: Path, out: Path, cache: Path, jobs: int = 1,
     wall = time.perf_counter() - t0
     if p.returncode not in (0, 1):  # 1: some task did not meet its expectation
         raise RuntimeError(f"optkin run failed ({p.returncode}): {p.stderr[-2000:]}")
-    return wall
+    cpu = [float(line.split()[1]) for line in p.stderr.splitlines()
+           if line.startswith("parent-cpu ")]
+    return wall, (cpu[-1] if cpu else float("nan"))
 
 
-def task_times(out: Path) -> list[float]:
-    with open(out / "summary.csv", newline="") as fh:
-        return [float(r["time"]) for r in csv.DictReader(fh) if r.get("time")]
+def unit_costs(out: Path, batch: Path) -> list[tuple[str, str, float]]:
+    """(problem, topology, elapsed) of every result of a run of ``batch``, in the order a
+    one-worker run starts them (the runner's longest-first order, from its own function)."""
+    from optkin.problems.runner import _units, find_problem_files
+
+    rows = {}
+    for f in out.glob("*.json"):
+        data = json.loads(f.read_text())
+        if "elapsed" in data:
+            rows[data["problem"]] = (data["input"]["mechanism"].get("name", "?"),
+                                     float(data["elapsed"]))
+    todo = [(i, i.path.read_bytes()) for i in find_problem_files([str(batch)])]
+    order = [u.spec["display"] for u in _units(todo, False, split=False)]
+    return [(name, *rows[name]) for name in order if name in rows]
 
 
 _VOLATILE = {"time", "elapsed", "created", "host", "pid", "started", "finished", "optkin",
@@ -169,29 +200,45 @@ def results_of(out: Path) -> dict[str, object]:
 # The model
 # ---------------------------------------------------------------------------------------
 
-def lpt_makespan(costs, workers: int) -> float:
-    """Makespan of the longest-processing-time-first schedule on ``workers`` machines."""
-    loads = [0.0] * workers
-    heapq.heapify(loads)
-    for c in sorted(costs, reverse=True):
-        heapq.heappush(loads, heapq.heappop(loads) + c)
-    return max(loads)
+def warmups(units: list[tuple[str, str, float]]) -> tuple[dict[str, float], list[float]]:
+    """Per topology, the first unit's cost over the median of the others; and the unit
+    costs with that excess removed (the first unit costs the median)."""
+    by: dict[str, list[float]] = {}
+    for _, topo, c in units:
+        by.setdefault(topo, []).append(c)
+    excess = {t: max(0.0, cs[0] - float(np.median(cs[1:]))) if len(cs) > 1 else 0.0
+              for t, cs in by.items()}
+    seen: set[str] = set()
+    costs = []
+    for _, topo, c in units:
+        costs.append(c - excess[topo] if topo not in seen else c)
+        seen.add(topo)
+    return excess, costs
 
 
-def predict(costs, fixed: float, per_unit: float, workers: int, n: int,
-            seed: int = 0) -> dict[str, float]:
-    """Predicted wall time and efficiency of a batch of ``n`` tasks drawn from ``costs``.
+def predict(costs, fixed: float, per_unit: float, warm: float, parent: float, workers: int,
+            n: int, inflation: float = 1.0, seed: int = 0) -> dict[str, float]:
+    """Predicted wall time and efficiency of a batch of ``n`` units drawn from ``costs``.
 
-    T(P) = fixed + LPT makespan of (c_i + per_unit) on P workers; the efficiency is
-    T(1) / (P T(P)). The costs of the ``n`` tasks are the measured ones repeated (and, for
-    a remainder, resampled with ``seed``), so the distribution is the measured one.
+    T(P) = fixed + max(LPT makespan of (c_i * inflation + per_unit) on P workers that each
+    start with ``warm``, n * parent); the efficiency is T(1) / (P T(P)) with T(1) the same
+    model at one worker and no inflation. The ``n`` costs are the measured ones repeated
+    (a remainder resampled with ``seed``), so the distribution is the measured one.
     """
     costs = np.asarray(costs, dtype=float)
     reps = n // len(costs)
     rest = np.random.default_rng(seed).choice(costs, n - reps * len(costs), replace=False)
-    big = np.r_[np.tile(costs, reps), rest] + per_unit
-    t1 = fixed + big.sum()
-    tp = fixed + lpt_makespan(big, workers)
+    big = np.r_[np.tile(costs, reps), rest]
+
+    def makespan(P: int, infl: float) -> float:
+        loads = [warm] * P
+        heapq.heapify(loads)
+        for c in sorted(big * infl + per_unit, reverse=True):
+            heapq.heappush(loads, heapq.heappop(loads) + c)
+        return fixed + max(max(loads), n * parent)
+
+    t1 = makespan(1, 1.0)
+    tp = makespan(workers, inflation)
     return {"t1": t1, "tp": tp, "efficiency": t1 / (workers * tp)}
 
 
@@ -205,58 +252,85 @@ def _local_cluster(workers: int):
                         dashboard_address=None, silence_logs=50)
 
 
+ROUNDS = int(os.environ.get("OPTKIN_SCALING_ROUNDS", "1"))
+
+
 def test_scaling(benchmark, tmp_path):
     batch = tmp_path / "batch"
     make_batch(batch, N_PROBLEMS)
     cores = os.cpu_count() or 1
     counts = sorted({1, 2, cores} & set(range(1, cores + 1)))
+    try:
+        import distributed  # noqa: F401
+        have_dask = True
+    except ImportError:
+        have_dask = False
 
     def measure():
-        walls, same = {}, {}
-        ref = None
-        for P in counts:
-            out = tmp_path / f"pool{P}"
-            walls[f"pool{P}"] = run_batch(batch, out, tmp_path / f"cache_pool{P}", jobs=P)
-            if P == 1:
-                ref = results_of(out)
-                costs = task_times(out)
-            same[f"pool{P}"] = results_of(out) == ref
-        try:
-            import distributed  # noqa: F401
-            have_dask = True
-        except ImportError:
-            have_dask = False
-        if have_dask:
+        walls: dict[str, list[float]] = {}
+        same: dict[str, bool] = {}
+        ref = units = parent_cpu = None
+        sums: dict[str, list[float]] = {}
+        for r in range(ROUNDS):  # interleaved, so that a slow spell of the machine hits all
             for P in counts:
-                out = tmp_path / f"dask{P}"
+                key = f"pool{P}"
+                out = tmp_path / f"{key}_{r}"
+                wall, cpu = run_batch(batch, out, tmp_path / f"cache_{key}_{r}", jobs=P)
+                walls.setdefault(key, []).append(wall)
+                sums.setdefault(key, []).append(sum(c for _, _, c in unit_costs(out, batch)))
+                if ref is None:
+                    ref, units, parent_cpu = results_of(out), unit_costs(out, batch), cpu
+                same[key] = same.get(key, True) and results_of(out) == ref
+            for P in counts if have_dask else ():
+                key = f"dask{P}"
+                out = tmp_path / f"{key}_{r}"
                 with _local_cluster(P) as cluster:
-                    walls[f"dask{P}"] = run_batch(batch, out, tmp_path / f"cache_dask{P}",
-                                                  scheduler=cluster.scheduler_address)
-                same[f"dask{P}"] = results_of(out) == ref
-        # overhead per unit: trivial problems, 1 and 4 times as many
+                    wall, _ = run_batch(batch, out, tmp_path / f"cache_{key}_{r}",
+                                        scheduler=cluster.scheduler_address)
+                walls.setdefault(key, []).append(wall)
+                same[key] = same.get(key, True) and results_of(out) == ref
+        # overhead per unit outside the worker: trivial problems, 8 and 32 of them
         triv_a, triv_b = tmp_path / "triv_a", tmp_path / "triv_b"
         make_trivial(triv_a, 8)
         make_trivial(triv_b, 32)
-        ta = run_batch(triv_a, tmp_path / "triv_out_a", tmp_path / "cache_triv")
-        tb = run_batch(triv_b, tmp_path / "triv_out_b", tmp_path / "cache_triv")
-        per_unit = max(0.0, (tb - ta) / 24)
-        return walls, same, costs, per_unit
+        ta, _ = run_batch(triv_a, tmp_path / "triv_out_a", tmp_path / "cache_triv")
+        tb, _ = run_batch(triv_b, tmp_path / "triv_out_b", tmp_path / "cache_triv")
+        ea = sum(c for _, _, c in unit_costs(tmp_path / "triv_out_a", triv_a))
+        eb = sum(c for _, _, c in unit_costs(tmp_path / "triv_out_b", triv_b))
+        per_unit = max(0.0, ((tb - eb) - (ta - ea)) / 24)
+        return walls, same, units, parent_cpu, per_unit, sums
 
-    walls, same, costs, per_unit = benchmark.pedantic(measure, rounds=1, iterations=1)
-    t1 = walls["pool1"]
-    fixed = max(0.0, t1 - sum(costs) - per_unit * len(costs))
-    info = {"n_problems": N_PROBLEMS, "cores": cores, "walls": walls, "same_results": same,
-            "task_cost_sum": sum(costs), "task_cost_median": float(np.median(costs)),
-            "task_cost_max": max(costs), "fixed": fixed, "per_unit": per_unit}
-    for key, w in walls.items():
+    walls, same, units, parent_cpu, per_unit, sums = benchmark.pedantic(
+        measure, rounds=1, iterations=1)
+    n = len(units)
+    excess, costs = warmups(units)
+    warm = sum(excess.values())
+    med = {k: float(np.median(v)) for k, v in walls.items()}
+    t1 = med["pool1"]
+    parent = parent_cpu / n  # start-up included: an upper bound of the per-unit share
+    fixed = max(0.0, t1 - sum(costs) - n * per_unit - warm)
+    inflation = (float(np.median(sums["pool2"])) / float(np.median(sums["pool1"]))
+                 if "pool2" in sums else 1.0)
+    info = {"n_problems": N_PROBLEMS, "cores": cores, "rounds": ROUNDS, "walls": walls,
+            "wall_median": med, "same_results": same, "unit_cost_sum": sum(costs),
+            "unit_cost_median": float(np.median(costs)), "unit_cost_max": max(costs),
+            "warmup_per_topology": excess, "fixed": fixed, "per_unit": per_unit,
+            "parent_cpu_per_unit": parent, "cpu_inflation_at_2": inflation}
+    for key, ws in walls.items():
         P = int(key[4:])
-        info[f"speedup_{key}"] = t1 / w
-        info[f"efficiency_{key}"] = t1 / w / P
-    for P in (2, 16, 64):
-        pr = predict(costs, fixed, per_unit, P, 192)
-        info[f"predicted_efficiency_192_at_{P}"] = pr["efficiency"]
-    pr2 = predict(costs, fixed, per_unit, 2, N_PROBLEMS)
-    info["predicted_speedup_here_at_2"] = pr2["t1"] / pr2["tp"]
+        ratios = [w1 / w for w1, w in zip(walls["pool1"], ws)]  # round by round
+        info[f"speedup_{key}"] = float(np.median(ratios))
+        info[f"efficiency_{key}"] = float(np.median(ratios)) / P
+    model = dict(costs=costs, fixed=fixed, per_unit=per_unit, warm=warm, parent=parent)
+    if "pool2" in walls:
+        pr = predict(**model, workers=2, n=n, inflation=inflation)
+        info["predicted_wall_pool2"] = pr["tp"]
+        info["predicted_speedup_pool2"] = pr["t1"] / pr["tp"]
+    for P in (16, 64):
+        info[f"predicted_efficiency_192_at_{P}"] = predict(**model, workers=P,
+                                                           n=192)["efficiency"]
+        info[f"predicted_efficiency_192_at_{P}_inflated"] = predict(
+            **model, workers=P, n=192, inflation=inflation)["efficiency"]
     benchmark.extra_info.update(info)
     print(json.dumps(info, indent=1))
     assert all(same.values()), same
