@@ -123,7 +123,11 @@ def _count_toml(paths: Sequence[str], most: int) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    if not args.scheduler and isinstance(args.jobs, int) and args.jobs >= 1:
+    if args.scheduler:  # connect (and have the Dask workers start theirs) meanwhile
+        from optkin.problems.dask_client import preconnect
+
+        preconnect(args.scheduler)
+    elif isinstance(args.jobs, int) and args.jobs >= 1:
         # the workers start while this process imports the runner and reads the files
         from optkin.problems.workers import prestart
 

@@ -177,6 +177,10 @@ def _busy_worker(problem: str | None = None, timeout: float = 60.0,
     while time.perf_counter() - t0 < timeout:
         for w in list(wk._LIVE):
             job = w.job
+            # a live worker of a run in flight only: a dead worker object may keep its
+            # task, and its pid may since belong to another process (pid_max is 32768)
+            if w.dead or w.proc.poll() is not None:
+                continue
             if w.task is not None and job is not None and (
                     problem is None or job.key.split("#")[0] == problem) and (
                     task is None or w.task == task):
@@ -489,7 +493,9 @@ def test_scheduler_that_is_not_dask_is_a_quick_user_error(banner, tmp_path: Path
     """B14: a service that sends a banner (a 2.8 EiB frame length) or keeps the connection
     open without answering gives exit 2 with one line, within the connect timeout."""
     pytest.importorskip("distributed")
-    monkeypatch.setattr(rn, "DASK_CONNECT_TIMEOUT", 2.0)
+    from optkin.problems import dask_client
+
+    monkeypatch.setattr(dask_client, "DASK_CONNECT_TIMEOUT", 2.0)
     srv, _ = _serve(banner)
     try:
         t0 = time.perf_counter()

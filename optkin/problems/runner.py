@@ -17,7 +17,6 @@ import math
 import os
 import platform
 import tempfile
-import threading
 import time
 import traceback
 import uuid
@@ -877,58 +876,15 @@ def validate_paths(paths: Sequence[str | os.PathLike],
 # Dask
 # ---------------------------------------------------------------------------
 
-#: Seconds allowed to reach a Dask scheduler and exchange the first messages.
-DASK_CONNECT_TIMEOUT = 10.0
-
-
-def _dask_client(address: str) -> Any:
-    """A Dask client of ``address``, or a ProblemFileError within the connect timeout.
-
-    The connection is made in a helper thread so that a service that is not a Dask
-    scheduler (one that sends a banner, or keeps the connection open without answering)
-    can neither hang the run nor escape as a raw exception.
-    """
-    try:
-        from distributed import Client
-    except ImportError:
-        raise ProblemFileError(
-            "--scheduler: dask.distributed is not installed; pip install 'optkin[dask]'"
-        ) from None
-    box: dict[str, Any] = {}
-
-    def connect() -> None:
-        try:
-            box["client"] = Client(address, timeout=f"{DASK_CONNECT_TIMEOUT:g}s")
-        except BaseException as e:  # noqa: BLE001 - reported below, whatever it is
-            box["error"] = e
-
-    t = threading.Thread(target=connect, daemon=True, name="optkin-dask-connect")
-    t.start()
-    t.join(DASK_CONNECT_TIMEOUT + 5.0)
-    if "client" in box:
-        return box["client"]
-    if t.is_alive():
-        why = f"no Dask scheduler answered within {DASK_CONNECT_TIMEOUT + 5.0:g} s"
-    else:
-        e = box.get("error")
-        why = f"{type(e).__name__}: {str(e)[:200]}" if not isinstance(e, MemoryError) else \
-            "the service there does not speak the Dask protocol"
-    raise ProblemFileError(f"--scheduler: cannot connect to {address!r}: {why}; give the "
-                           "address of a Dask scheduler (e.g. tcp://host:8786)")
-
-
 def _run_dask(address: str, jobs: list[Job], time_limit: float,
               done: Callable[[JobOutcome], None]) -> None:
-    client = _dask_client(address)
+    from optkin.problems.dask_client import connect
+
+    client = connect(address)  # (it registered the plugin that prestarts optkin workers)
     try:
         from distributed import as_completed
 
-        from optkin.problems.dask_worker import PrestartWorkers, run_unit
-
-        # every Dask worker starts its optkin worker processes now, while the tasks are
-        # sent (and keeps them for later runs); a worker that cannot is served as before
-        with contextlib.suppress(Exception):
-            client.register_plugin(PrestartWorkers(), name=PrestartWorkers.name)
+        from optkin.problems.dask_worker import run_unit
 
         futures = {  # the longest first, as for the local pool (jobs come sorted)
             client.submit(run_unit, job.spec, time_limit,

@@ -53,6 +53,10 @@ _MAX_MESSAGE = 1 << 31
 _MAX_SETUP_DEATHS = 2
 #: Seconds a new worker may take to import optkin and say it is ready.
 _START_LIMIT = 120.0
+#: Seconds a worker may take to acknowledge a problem sent to it (a healthy one answers in
+#: microseconds; one that does not, a stopped or wedged process, is replaced at once
+#: rather than at the end of the problem's time limit).
+_ACK_LIMIT = 30.0
 
 
 # ---------------------------------------------------------------------------
@@ -125,6 +129,7 @@ def serve(rfd: int, wfd: int, parent: int) -> None:
             return
         _, jid, spec = msg
         try:
+            _send(wfd, ("got", jid))  # at once: the parent knows this worker is responsive
             _send(wfd, runner.worker_job(jid, spec, lambda m: _send(wfd, m)))
         except BrokenPipeError:
             return
@@ -200,6 +205,7 @@ class _Worker:
         self.limit = 0.0
         self.started = time.monotonic()
         self.ready = False
+        self.acked = False
         self.info: dict[str, Any] = {}
         self.dead = False
         # a worker that cannot even start (broken installation) must not hang the run
@@ -342,23 +348,20 @@ def _mine() -> str:
     return str(Path(optkin.__file__).resolve().parent)
 
 
-def _boot(env: dict[str, str]) -> None:
-    """Start one worker, wait until it is ready, and keep it idle (a :func:`prestart` thread)."""
-    key = _env_key(env)
-    events: queue.Queue = queue.Queue()
-    w: _Worker | None = None
+def _await_ready(w: _Worker | None, events: queue.Queue, key: tuple) -> None:
+    """Wait until a prestarted worker is ready, then keep it idle (a background thread)."""
     try:
-        w = _Worker(env, events)
-        try:
-            _, msg = events.get(timeout=_START_LIMIT)
-        except queue.Empty:
-            msg = None
-        if msg is not None and msg[0] == "ready" and msg[1].get("optkin") == _mine():
-            w.ready, w.info, w.deadline = True, msg[1], None
-        else:  # it died, hung, or imported another optkin: a run will start its own
-            w.kill()
-            w.close()
-            w = None
+        if w is not None:
+            try:
+                _, msg = events.get(timeout=_START_LIMIT)
+            except queue.Empty:
+                msg = None
+            if msg is not None and msg[0] == "ready" and msg[1].get("optkin") == _mine():
+                w.ready, w.info, w.deadline = True, msg[1], None
+            else:  # it died, hung, or imported another optkin: a run will start its own
+                w.kill()
+                w.close()
+                w = None
     except Exception:  # noqa: BLE001 - a run that needs a worker will say why it cannot
         w = None
     finally:
@@ -370,7 +373,7 @@ def _boot(env: dict[str, str]) -> None:
 
 
 def prestart(n: int, threads: int | None = None) -> int:
-    """Start up to ``n`` workers in the background, for a run about to begin in this process.
+    """Start up to ``n`` workers for a run about to begin in this process.
 
     A worker's start-up (a Python process importing optkin, numpy, CasADi and pydantic,
     about 0.5 s) then overlaps whatever the caller does next (the command line imports the
@@ -378,6 +381,10 @@ def prestart(n: int, threads: int | None = None) -> int:
     :func:`run_jobs` takes these workers (waiting for one still starting rather than
     starting another); workers a run does not take are closed at exit like any idle worker.
     ``threads`` as for :func:`run_jobs`. Returns the number of workers started.
+
+    The processes are started from the calling thread, which must outlive them (Linux
+    kills a worker when the *thread* that started it ends: ``PR_SET_PDEATHSIG``); only the
+    wait for their first message runs in the background.
     """
     env = _worker_env(threads)
     key = _env_key(env)
@@ -386,7 +393,12 @@ def prestart(n: int, threads: int | None = None) -> int:
         k = max(0, int(n) - have)
         _BOOTING[key] = _BOOTING.get(key, 0) + k
     for _ in range(k):
-        threading.Thread(target=_boot, args=(env,), daemon=True,
+        events: queue.Queue = queue.Queue()
+        try:
+            w: _Worker | None = _Worker(env, events)
+        except Exception:  # noqa: BLE001 - cannot start one now: a run will try, and say why
+            w = None
+        threading.Thread(target=_await_ready, args=(w, events, key), daemon=True,
                          name="optkin-worker-start").start()
     return k
 
@@ -455,9 +467,9 @@ def run_jobs(
             return
         job = pending.popleft()
         spec = dict(job.spec, done_tasks=job.tasks, time_limit=time_limit)
-        w.job, w.task = job, None
+        w.job, w.task, w.acked = job, None, False
         w.limit = time_limit
-        w.deadline = time.monotonic() + time_limit + _GRACE
+        w.deadline = time.monotonic() + min(_ACK_LIMIT, time_limit + _GRACE)
         if not w.send(("run", job.key, spec)):
             pending.appendleft(job)
             w.job = w.deadline = None
@@ -515,6 +527,11 @@ def run_jobs(
                 now = time.monotonic()
                 for x in workers:
                     if x.deadline is not None and now >= x.deadline:
+                        if x.job is not None and not x.acked:
+                            x.kill()  # the problem goes to a fresh worker
+                            abandon(x, f"the worker did not take the problem within "
+                                       f"{_ACK_LIMIT:g} s")
+                            continue
                         where = (f"task[{x.task}]" if x.task is not None
                                  else "loading the problem")
                         x.kill()
@@ -540,7 +557,10 @@ def run_jobs(
             job = w.job
             if job is None or msg[1] != job.key:
                 continue
-            if tag == "task":
+            if tag == "got":
+                w.acked = True
+                w.deadline = time.monotonic() + time_limit + _GRACE
+            elif tag == "task":
                 _, _, i, limit = msg
                 limit = time_limit if limit is None else limit
                 w.task, w.limit, w.started = i, float(limit), time.monotonic()
