@@ -25,14 +25,14 @@ the efficiencies, whether the results equal those of ``--jobs 1``, and the predi
 * the warm-up of a worker: for each topology (library mechanism), the first unit's cost
   over the median of the others, in the order the runner ran them; every worker pays it
   for every topology it meets, so the model charges it to every worker;
-* the overhead per unit outside the worker (messages, the parent writing the result):
-  the wall time per problem of a run of 32 trivial problems beyond one of 8, minus their
-  own ``elapsed``;
+* the fixed cost: the wall time of a run of one trivial problem (a four-bar's forward
+  model) less that problem's own time: start-up of the command line and of a worker, the
+  summary; paid once whatever the number of workers;
+* the overhead per unit outside the worker (messages, the parent writing the result): the
+  rest of the first ``--jobs 1`` run's wall time, shared among its units;
 * the parent's CPU time per unit (``time.process_time`` of the command-line process over
   the ``--jobs 1`` run, which excludes the workers): the parent handles the results one
   after the other, so no schedule beats ``n`` times it;
-* the fixed cost: the wall time of ``--jobs 1`` minus all of the above (start-up of the
-  command line and of a worker, the summary): paid once whatever the number of workers;
 
 and predicts the makespan at P workers as the fixed cost plus the longer of the
 longest-processing-time schedule of the units (each worker starting with the warm-up) and
@@ -289,26 +289,22 @@ def test_scaling(benchmark, tmp_path):
                                         scheduler=cluster.scheduler_address)
                 walls.setdefault(key, []).append(wall)
                 same[key] = same.get(key, True) and results_of(out) == ref
-        # overhead per unit outside the worker: trivial problems, 8 and 32 of them
-        triv_a, triv_b = tmp_path / "triv_a", tmp_path / "triv_b"
-        make_trivial(triv_a, 8)
-        make_trivial(triv_b, 32)
-        ta, _ = run_batch(triv_a, tmp_path / "triv_out_a", tmp_path / "cache_triv")
-        tb, _ = run_batch(triv_b, tmp_path / "triv_out_b", tmp_path / "cache_triv")
-        ea = sum(c for _, _, c in unit_costs(tmp_path / "triv_out_a", triv_a))
-        eb = sum(c for _, _, c in unit_costs(tmp_path / "triv_out_b", triv_b))
-        per_unit = max(0.0, ((tb - eb) - (ta - ea)) / 24)
-        return walls, same, units, parent_cpu, per_unit, sums
+        # the fixed cost: a run of one trivial problem, less that problem's own time
+        triv = tmp_path / "triv"
+        make_trivial(triv, 1)
+        t_one, _ = run_batch(triv, tmp_path / "triv_out", tmp_path / "cache_triv")
+        fixed = max(0.0, t_one - sum(c for _, _, c in unit_costs(tmp_path / "triv_out", triv)))
+        return walls, same, units, parent_cpu, fixed, sums
 
-    walls, same, units, parent_cpu, per_unit, sums = benchmark.pedantic(
+    walls, same, units, parent_cpu, fixed, sums = benchmark.pedantic(
         measure, rounds=1, iterations=1)
     n = len(units)
     excess, costs = warmups(units)
     warm = sum(excess.values())
     med = {k: float(np.median(v)) for k, v in walls.items()}
-    t1 = med["pool1"]
+    t1 = walls["pool1"][0]  # the run the unit costs come from
     parent = parent_cpu / n  # start-up included: an upper bound of the per-unit share
-    fixed = max(0.0, t1 - sum(costs) - n * per_unit - warm)
+    per_unit = max(0.0, (t1 - fixed - warm - sum(costs)) / n)
     inflation = (float(np.median(sums["pool2"])) / float(np.median(sums["pool1"]))
                  if "pool2" in sums else 1.0)
     info = {"n_problems": N_PROBLEMS, "cores": cores, "rounds": ROUNDS, "walls": walls,
