@@ -530,7 +530,7 @@ def run_jobs(
                         if x.job is not None and not x.acked:
                             x.kill()  # the problem goes to a fresh worker
                             abandon(x, f"the worker did not take the problem within "
-                                       f"{_ACK_LIMIT:g} s")
+                                       f"{min(_ACK_LIMIT, x.limit + _GRACE):g} s")
                             continue
                         where = (f"task[{x.task}]" if x.task is not None
                                  else "loading the problem")

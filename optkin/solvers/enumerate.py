@@ -693,18 +693,11 @@ def _nn_update(model: Model, Y: np.ndarray, s0: int, nn: np.ndarray) -> np.ndarr
 
 #: One-sided confidence level of ``p_new_upper`` (see the module docstring for why 99 %).
 P_NEW_CONFIDENCE = 0.99
-# chi2.ppf(p, 2k + 2) / 2 = gammaincinv(k + 1, p): the chi-squared law with 2k + 2 degrees of
-# freedom is a gamma law of shape k + 1 and scale 2.
-_POISSON_UPPER = gammaincinv(np.arange(129) + 1.0, P_NEW_CONFIDENCE)
-
-
 def poisson_upper(k: int) -> float:
     """One-sided 99 % upper confidence limit of a Poisson mean from ``k`` observed events,
-    chi2.ppf(0.99, 2 k + 2) / 2 (a table up to k = 128): -ln 0.01 = 4.6 for k = 0."""
-    k = int(k)
-    if k < _POISSON_UPPER.size:
-        return float(_POISSON_UPPER[k])
-    return float(gammaincinv(k + 1.0, P_NEW_CONFIDENCE))
+    chi2.ppf(0.99, 2 k + 2) / 2 = gammaincinv(k + 1, 0.99) (the chi-squared law with 2k + 2
+    degrees of freedom is a gamma law of shape k + 1 and scale 2): -ln 0.01 = 4.6 for k = 0."""
+    return float(gammaincinv(int(k) + 1.0, P_NEW_CONFIDENCE))
 
 
 def _good_turing(hits: Sequence[int], starts: int) -> dict[str, Any]:
