@@ -52,11 +52,11 @@ def _positive_seconds(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``optkin`` (subcommands run, validate, show)."""
-    from optkin.problems.schema import optkin_version
+    import optkin  # its version only: the problem schema (pydantic) loads when needed
 
     p = _Parser(prog="optkin", description="Kinematics of closed-chain and parallel robots: "
                 "run problem files (TOML) and collect results.")
-    p.add_argument("--version", action="version", version=f"optkin {optkin_version()}")
+    p.add_argument("--version", action="version", version=f"optkin {optkin.__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 

@@ -15,10 +15,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from matplotlib.path import Path
-from scipy.spatial import cKDTree
 
-__all__ = ["Face", "faces", "ring_area", "point_in_face"]
+__all__ = ["Face", "faces", "ring_area", "point_in_face", "points_in_ring", "close_pairs"]
 
 
 @dataclass
@@ -39,12 +37,71 @@ def ring_area(R: np.ndarray) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
+def points_in_ring(R: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Which of the points ``P`` (n x 2) lie inside the closed ring ``R`` (m x 2, first
+    vertex not repeated or repeated): the even-odd crossing rule, a ray to +x.
+
+    Points on the ring itself may go either way. Written here rather than borrowed from
+    ``matplotlib.path`` (the same rule in C): importing matplotlib costs a worker process
+    about 0.3 s, more than most of the problems it runs.
+    """
+    P = np.atleast_2d(np.asarray(P, dtype=float))
+    R = np.asarray(R, dtype=float)
+    A, B = R, np.roll(R, -1, axis=0)
+    inside = np.zeros(len(P), dtype=bool)
+    px, py = P[:, 0, None], P[:, 1, None]
+    step = max(1, 2_000_000 // max(len(P), 1))
+    for s0 in range(0, len(A), step):  # edges in chunks: n x chunk temporaries
+        a, b = A[s0:s0 + step], B[s0:s0 + step]
+        ay, by = a[None, :, 1], b[None, :, 1]
+        straddle = (ay > py) != (by > py)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = a[None, :, 0] + (py - ay) * (b[None, :, 0] - a[None, :, 0]) / (by - ay)
+        inside ^= (np.count_nonzero(straddle & (px < x), axis=1) % 2).astype(bool)
+    return inside
+
+
 def point_in_face(f: Face, P: np.ndarray) -> np.ndarray:
     P = np.atleast_2d(P)
-    inside = Path(f.outer).contains_points(P)
+    inside = points_in_ring(f.outer, P)
     for h in f.holes:
-        inside &= ~Path(h).contains_points(P)
+        inside &= ~points_in_ring(h, P)
     return inside
+
+
+def close_pairs(X: np.ndarray, cell: np.ndarray, tol: float) -> np.ndarray:
+    """Pairs (i, j), i < j, of the points ``X`` (n x 2) at most ``tol`` apart, given each
+    point's distinct cell ``cell`` = round(X / tol) (integer-valued, n x 2): such points'
+    cells differ by at most 2 in each coordinate (1 but for rounding halves to even), so
+    each cell is looked up among those neighbours by a sorted key. (What ``scipy.spatial.cKDTree.query_pairs`` gives; importing
+    ``scipy.spatial`` costs a worker process about 0.4 s.)
+    """
+    n = len(X)
+    if n < 2:
+        return np.zeros((0, 2), dtype=int)
+    ux, rx = np.unique(cell[:, 0], return_inverse=True)
+    uy, ry = np.unique(cell[:, 1], return_inverse=True)
+    rx, ry = np.asarray(rx).ravel(), np.asarray(ry).ravel()
+    key = rx.astype(np.int64) * len(uy) + ry
+    order = np.argsort(key)
+    skey = key[order]
+    found = []
+    offsets = [(dx, dy) for dx in range(3) for dy in range(-2, 3) if dx > 0 or dy > 0]
+    for dx, dy in offsets:  # each unordered pair of cells once
+        tx, ty = cell[:, 0] + dx, cell[:, 1] + dy
+        jx = np.searchsorted(ux, tx).clip(0, len(ux) - 1)
+        jy = np.searchsorted(uy, ty).clip(0, len(uy) - 1)
+        ok = (ux[jx] == tx) & (uy[jy] == ty)
+        k = jx.astype(np.int64) * len(uy) + jy
+        pos = np.searchsorted(skey, k).clip(0, n - 1)
+        ok &= skey[pos] == k
+        i = np.flatnonzero(ok)
+        j = order[pos[ok]]
+        found.append(np.c_[i, j])
+    pairs = np.vstack(found)
+    d = np.linalg.norm(X[pairs[:, 0]] - X[pairs[:, 1]], axis=1)
+    pairs = np.sort(pairs[d <= tol], axis=1)
+    return pairs
 
 
 def _segments(lines: list[tuple[np.ndarray, bool]]):
@@ -203,8 +260,7 @@ def faces(lines: list[tuple[np.ndarray, bool]], snap: float, dedupe: float = 0.0
     _, first, inv = np.unique(cell, axis=0, return_index=True, return_inverse=True)
     inv = np.asarray(inv).ravel()
     reps = pts[first]
-    tree = cKDTree(np.nan_to_num(reps))
-    pairs = tree.query_pairs(tol, output_type="ndarray")
+    pairs = close_pairs(np.nan_to_num(reps), cell[first], tol)
     parent = np.arange(len(reps))
 
     def find(a):
@@ -286,14 +342,13 @@ def faces(lines: list[tuple[np.ndarray, bool]], snap: float, dedupe: float = 0.0
             neg_f.append((R, ar, comp[cyc[0]]))
     out = [Face(outer=R, holes=[], area=ar) for R, ar, _ in pos_f]
     tiny = 1e-10 * scale * scale
-    paths = [Path(R) for R, _, _ in pos_f]
     for R, ar, c in neg_f:
         best, barea = None, np.inf
         probe = R[0]
         for k, (_, arp, cp) in enumerate(pos_f):
             if cp == c:
                 continue
-            if arp < barea and paths[k].contains_point(probe):
+            if arp < barea and points_in_ring(pos_f[k][0], probe)[0]:
                 best, barea = k, arp
         if best is not None:
             out[best].holes.append(R)
