@@ -22,7 +22,7 @@ import pytest
 import optkin
 from optkin import mechanisms as lib
 from optkin.model import compiled as cc
-from optkin.model.core import Model
+from optkin.model.core import Model, get_model
 from optkin.model.fused import result_function
 
 RNG = np.random.default_rng(8)
@@ -315,3 +315,58 @@ def test_forward_batch_docstring_example():
 
     res = doctest.testmod(batch, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert res.attempted > 0 and res.failed == 0
+
+
+@needs_cc
+def test_background_build_gives_the_same_function(tmp_path, monkeypatch):
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+    model = Model(rpr())
+    f = model.topology.phi
+    pending = cc.start_library("bg:test", [f])
+    assert isinstance(pending, cc.PendingLibrary)
+    lib_fns = pending.wait()
+    assert isinstance(lib_fns, dict) and pending.poll() is lib_fns
+    assert not any(p.name.startswith(".build-") for p in tmp_path.iterdir())  # cleaned up
+    g = lib_fns[f.name()]
+    assert g.is_a("External")
+    for qa, x in _random_inputs(model, 5):
+        np.testing.assert_array_equal(np.array(g(qa, x, model.p)), np.array(f(qa, x, model.p)))
+    again = cc.start_library("bg:test", [f])  # now in the cache: loaded, nothing started
+    assert isinstance(again, dict)
+
+
+def test_background_build_failure_is_reported(tmp_path, monkeypatch):
+    fake = tmp_path / "fakecc"
+    fake.write_text("#!/bin/sh\necho 'fake compiler: refused' >&2\nexit 3\n")
+    fake.chmod(0o755)
+    cache_dir = tmp_path / "cache"
+    cache_dir.mkdir(mode=0o700)
+    monkeypatch.setenv("OPTKIN_CACHE", str(cache_dir))
+    monkeypatch.setenv("OPTKIN_CC", str(fake))
+    pending = cc.start_library("bg:fail", [Model(rpr()).topology.phi])
+    assert isinstance(pending, cc.PendingLibrary)
+    assert pending.wait() is False and pending.poll() is False
+    assert list(cache_dir.iterdir()) == []
+
+
+@needs_cc
+def test_assembly_modes_compiles_in_the_background(tmp_path, monkeypatch):
+    """jit="auto" on a 6+ unknown model with an empty cache: the first call runs the
+    interpreted step while the compiler works, a later one the compiled step; the modes are
+    the same."""
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+    optkin.model.clear_cache()
+    mech = stewart()
+    qa = np.full(6, 1.05)
+    first = optkin.assembly_modes(mech, qa, seed=1)
+    assert first.info["jit"] is False
+    store = get_model(mech).topology._store  # the step entry holds the running build
+    pending = [e["pending"] for e in store.values() if isinstance(e, dict) and "pending" in e]
+    assert len(pending) == 1
+    assert isinstance(pending[0].wait(), dict)
+    second = optkin.assembly_modes(mech, qa, seed=1)
+    assert second.info["jit"] is True
+    assert len(first) == len(second) >= 1
+    for a, b in zip(first, second):
+        np.testing.assert_array_equal(a.x, b.x)
+    optkin.model.clear_cache()

@@ -69,6 +69,8 @@ __all__ = [
     "compile_mode",
     "find_compiler",
     "library",
+    "start_library",
+    "PendingLibrary",
 ]
 
 log = logging.getLogger("optkin.compiled")
@@ -453,6 +455,102 @@ def libraries(
                 continue
             out[k] = _load(path, tag, key, funcs)
     return out
+
+
+class PendingLibrary:
+    """A library being compiled in the background (:func:`start_library`).
+
+    The C code was generated in the calling thread; only the compiler runs meanwhile, as a
+    separate process, so nothing else in this process waits for it. :meth:`poll` returns
+    None while it runs, then (once) the loaded Functions, or ``False`` when the build
+    failed; afterwards it keeps returning that outcome.
+    """
+
+    def __init__(self, tag: str, key: str, path: Path, funcs: Sequence[ca.Function],
+                 tmp: str, so: Path, proc: subprocess.Popen) -> None:
+        self.tag, self.key, self.path, self.funcs = tag, key, path, list(funcs)
+        self._tmp, self._so, self._proc = tmp, so, proc
+        self._out: dict[str, ca.Function] | bool | None = None
+
+    def poll(self) -> dict[str, ca.Function] | bool | None:
+        if self._out is not None:
+            return self._out
+        if self._proc.poll() is None:
+            return None
+        return self._finish()
+
+    def wait(self, timeout: float = 600.0) -> dict[str, ca.Function] | bool:
+        try:
+            self._proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self._proc.kill()
+            self._proc.wait()
+        out = self.poll()
+        return False if out is None else out
+
+    def _finish(self) -> dict[str, ca.Function] | bool:
+        try:
+            if self._proc.returncode != 0:
+                err = (Path(self._tmp) / "compiler.log").read_bytes()[-2000:]
+                log.debug("optkin: compiler failed: %s", err.decode(errors="replace"))
+                self._out = False
+            else:
+                _write_record(self.path, self._so, self.tag, self.key, Path(self._tmp))
+                self._out = _load(self.path, self.tag, self.key, self.funcs) or False
+        except OSError as exc:
+            log.debug("optkin: cannot store %s (%s)", self.path, exc)
+            self._out = False
+        finally:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+        return self._out
+
+    def __del__(self) -> None:  # a build nobody waits for: stop it, leave nothing behind
+        try:
+            if self._out is None and self._proc.poll() is None:
+                self._proc.kill()
+                self._proc.wait()
+            if self._out is None:
+                shutil.rmtree(self._tmp, ignore_errors=True)
+        except Exception:  # noqa: BLE001 - interpreter shutdown
+            pass
+
+
+def start_library(tag: str, funcs: Sequence[ca.Function]
+                  ) -> dict[str, ca.Function] | PendingLibrary | None:
+    """:func:`library` without waiting for the compiler: the cached library when there is
+    one, else a :class:`PendingLibrary` whose compiler runs in the background, else None
+    (compiling off, no cache directory, no compiler, or the C code could not be
+    generated). The caller keeps using the interpreted Functions until :meth:`poll`
+    gives the compiled ones."""
+    if compile_mode() == "off":
+        return None
+    d = cache_dir()
+    if d is None:
+        return None
+    key = _digest(tag, funcs)
+    path = d / f"optkin_{tag.split(':')[0]}_{key[:20]}{_EXT}"
+    lib = _load(path, tag, key, funcs)
+    if lib is not None:
+        return lib
+    cc = find_compiler()
+    if cc is None:
+        return None
+    tmp = tempfile.mkdtemp(dir=d, prefix=".build-")
+    try:
+        src = Path(tmp) / (path.stem + ".c")
+        cg = ca.CodeGenerator(src.name, {"with_header": False})
+        for f in funcs:
+            cg.add(f)
+        cg.generate(tmp + os.sep)
+        so = Path(tmp) / path.name
+        with open(Path(tmp) / "compiler.log", "wb") as log_file:  # no pipe to fill up
+            proc = subprocess.Popen([cc, *_FLAGS, str(src), "-o", str(so), "-lm"],
+                                    stdout=subprocess.DEVNULL, stderr=log_file)
+    except (OSError, RuntimeError) as exc:
+        log.debug("optkin: generating %s failed (%s)", path.stem, exc)
+        shutil.rmtree(tmp, ignore_errors=True)
+        return None
+    return PendingLibrary(tag, key, path, funcs, tmp, so, proc)
 
 
 class FastFn:

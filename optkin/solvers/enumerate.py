@@ -140,7 +140,9 @@ ASSEMBLY_DEFAULTS: dict[str, Any] = {
     "step_max": "auto",  # threshold S of [7.55], scaled units (lengths / size); auto 0.3 or 1
     "dedup_tol": 1e-6,  # scaled distance under which two solutions are the same
     "rescue": 8,  # IPOPT rescues of stalled starts
-    "jit": "auto",  # compile the step to C: True, False, "auto" (6+ unknowns, or if cached)
+    "jit": "auto",  # compile the step to C: True (wait for the compiler), False, "cached" (if
+    # in the disk cache), "auto" ("cached" under 6 unknowns, else compiled in the background
+    # while the first calls use the interpreted step)
     "threads": 1,  # threads of the mapped step (more repeat the geometry in every column:
     # slower than one on the 2-core machine measured; batch runs parallelize by worker)
 }
@@ -282,7 +284,8 @@ class _Starts:
         else:
             X[:, lay.pos] = self.plo + U[:, col:] * (self.phi - self.plo)
         if lay.legs.size:
-            _enum.seed_legs(model, X, self.qa, self.rng, jit=self.jit)
+            _enum.seed_legs(model, X, self.qa, self.rng,
+                            jit=True if self.jit == "background" else self.jit)
         return X.T
 
     def take(self, n: int) -> np.ndarray:
@@ -412,7 +415,29 @@ def _step_function(model: Model, split: bool, step_max: float, k: int,
         return {"f": f, "tag": tag, "lib": None, "failed": False}
 
     entry = model.cached(("enumeration:step", split, float(step_max), int(k)), build)
-    if jit and entry["lib"] is None and not entry["failed"]:
+    if jit == "background" and entry["lib"] is None and not entry["failed"]:
+        # compiled when cached; else the compiler runs in the background while this call
+        # (and any until it is done) uses the interpreted step: the 0.6 s of a Stewart
+        # platform's build overlap the first solve instead of preceding it
+        pending = entry.get("pending")
+        if pending is None:
+            pending = cc.start_library(entry["tag"], [entry["f"]])
+            if pending is None:
+                entry["failed"] = True
+                _no_compiler_warning()
+            elif isinstance(pending, dict):
+                entry["lib"] = pending[entry["f"].name()]
+            else:
+                entry["pending"] = pending
+        else:
+            done = pending.poll()
+            if done is not None:
+                entry.pop("pending", None)
+                if done is False:
+                    entry["failed"] = True
+                else:
+                    entry["lib"] = done[entry["f"].name()]
+    elif jit and entry["lib"] is None and not entry["failed"]:
         lib = cc.library(entry["tag"], [entry["f"]], build=jit is True)
         if lib is not None:
             entry["lib"] = lib[entry["f"].name()]
@@ -839,7 +864,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         width = 64 if small else 256
     jit = o["jit"]
     if jit == "auto":
-        jit = "cached" if small else True
+        jit = "cached" if small else "background"
     threads = 1 if small else min(o["threads"], width)
     unroll = 3 if small else 2  # Newton iterations per call: fewer Python round trips
     budget = o["starts"]
