@@ -251,8 +251,11 @@ def predict(costs, fixed: float, per_unit: float, warm: float, parent: float, wo
 
 def _local_cluster(workers: int):
     from distributed import LocalCluster
+    # started as the README says to start Dask workers for optkin: with its preload, which
+    # starts the optkin worker processes with the Dask workers
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                        dashboard_address=None, silence_logs=50)
+                        dashboard_address=None, silence_logs=50,
+                        preload=["optkin.problems.dask_worker"])
 
 
 ROUNDS = int(os.environ.get("OPTKIN_SCALING_ROUNDS", "1"))

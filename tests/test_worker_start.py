@@ -90,3 +90,16 @@ def test_a_stopped_idle_worker_is_replaced_within_the_ack_limit(monkeypatch):
             idle = wk._IDLE.pop(key, [])
         for w in idle:
             w.close()
+
+
+def test_dask_preload_hook_starts_one_worker_per_thread(monkeypatch):
+    pytest.importorskip("distributed")
+    from types import SimpleNamespace
+
+    from optkin.problems import dask_worker
+
+    calls = []
+    monkeypatch.setattr(dask_worker, "prestart", lambda n, threads=None: calls.append((n, threads)))
+    dask_worker.dask_setup(SimpleNamespace(state=SimpleNamespace(nthreads=3)))
+    dask_worker.PrestartWorkers().setup(SimpleNamespace(state=SimpleNamespace(nthreads=2)))
+    assert calls == [(3, 1), (2, 1)]

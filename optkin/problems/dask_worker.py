@@ -52,3 +52,10 @@ class PrestartWorkers(WorkerPlugin):
 
     def setup(self, worker: Any) -> None:
         prestart(_threads(worker), threads=1)
+
+
+def dask_setup(worker: Any) -> None:
+    """Dask preload hook: ``dask worker --preload optkin.problems.dask_worker`` (or
+    ``LocalCluster(..., preload=["optkin.problems.dask_worker"])``) starts the optkin
+    worker processes with the Dask worker, before any run connects."""
+    prestart(_threads(worker), threads=1)
