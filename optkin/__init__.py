@@ -49,11 +49,14 @@ _LAZY: dict[str, str] = {
     "assembly_modes": "optkin.solvers.enumerate",
     "track": "optkin.solvers.enumerate",
     "working_modes": "optkin.solvers.enumerate",
+    "Certificate": "optkin.solvers.certify",
+    "certify": "optkin.solvers.certify",
 }
 
 __all__ = [
     "Aspects",
     "BatchResult",
+    "Certificate",
     "DofReport",
     "Jacobians",
     "KinResult",
@@ -73,6 +76,7 @@ __all__ = [
     "__version__",
     "aspects",
     "assembly_modes",
+    "certify",
     "classify",
     "dof",
     "forward",
@@ -128,4 +132,5 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     from .results import KinResult, SolutionSet, SolverStats
     from .solvers import forward, inverse
     from .solvers.batch import BatchResult, forward_batch
+    from .solvers.certify import Certificate, certify
     from .solvers.enumerate import WorkingModes, assembly_modes, track, working_modes

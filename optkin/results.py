@@ -111,6 +111,10 @@ class KinResult:
     posture : tuple or None
         For inverse solutions: the branch index of each leg; ``working_mode`` the sign of
         each B_jj (seed 004) where that applies.
+    certified : bool or None
+        None unless certification was asked for (``assembly_modes(..., certify=True)``,
+        :func:`optkin.certify`); then True when Krawczyk's test proved that a box around
+        ``x`` holds exactly one real solution.
     """
 
     q: np.ndarray
@@ -129,6 +133,7 @@ class KinResult:
     working_mode: tuple[int, ...] | None = None
     cond: float = float("nan")
     joint_names: tuple[str, ...] = ()
+    certified: bool | None = None
 
     @property
     def solve_time(self) -> float:
@@ -166,6 +171,7 @@ class KinResult:
                 "posture": self.posture,
                 "working_mode": self.working_mode,
                 "cond": self.cond,
+                **({} if self.certified is None else {"certified": bool(self.certified)}),
                 "stats": self.stats.to_dict(),
             }
         )
@@ -203,7 +209,10 @@ class SolutionSet(Sequence):
 
     def summary(self) -> str:
         near = sum(1 for s in self._sols if s.cond > 1e8)  # inf: singular (NaN: not known)
-        return f"{len(self._sols)} {self.kind}, {near} near-singular"
+        text = f"{len(self._sols)} {self.kind}, {near} near-singular"
+        if any(s.certified is not None for s in self._sols):
+            text += f", {sum(1 for s in self._sols if s.certified)} certified"
+        return text
 
     def __repr__(self) -> str:
         return f"SolutionSet({self.summary()})"

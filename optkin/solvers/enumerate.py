@@ -140,6 +140,7 @@ ASSEMBLY_DEFAULTS: dict[str, Any] = {
     "step_max": "auto",  # threshold S of [7.55], scaled units (lengths / size); auto 0.3 or 1
     "dedup_tol": 1e-6,  # scaled distance under which two solutions are the same
     "rescue": 8,  # IPOPT rescues of stalled starts
+    "certify": False,  # prove each mode by Krawczyk's test (optkin.solvers.certify)
     "jit": "auto",  # compile the step to C: True (wait for the compiler), False, "cached" (if
     # in the disk cache), "auto" ("cached" under 6 unknowns, else compiled in the background
     # while the first calls use the interpreted step)
@@ -621,6 +622,10 @@ def _assembly_options(opts: dict[str, Any], model: Model, given_time: bool = Tru
         {"step_max": v}, "step_max", w, positive=True))
     o["dedup_tol"] = _opt_float(opts, "dedup_tol", w)
     o["rescue"] = _opt_int(opts, "rescue", w, lo=0, hi=None)
+    if not isinstance(opts["certify"], (bool, np.bool_)):
+        raise MechanismError(f"{w}: option certify must be True or False, got "
+                             f"{show(opts['certify'])}")
+    o["certify"] = bool(opts["certify"])
     j = opts["jit"]
     if isinstance(j, (bool, np.bool_)):
         o["jit"] = bool(j)
@@ -1076,6 +1081,14 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             kr = make_result(model, qa, sols[:, k], tol, first_nit[k], stats)
         out.append(kr)
     hits_sorted = [hits[k] for k in order]
+    if o["certify"] and out:
+        from .certify import certify_point, mark_overlaps
+
+        certs = mark_overlaps([certify_point(model, qa, kr.x) for kr in out])
+        for kr, c in zip(out, certs):
+            kr.certified = c.certified
+            kr.stats.extra["certificate"] = c.message
+        info["certified"] = sum(c.certified for c in certs)
     gt = _good_turing(hits_sorted, done)
     complete = bound is not None and len(out) >= bound
     msg = (f"{len(out)} assembly modes from {done} starts ({converged} converged); "
