@@ -190,18 +190,27 @@ class SolutionSet(Sequence):
         kind: str = "solutions",
         info: dict[str, Any] | None = None,
         seed: int | None = None,
+        dimension: int | None = None,
+        components: Sequence[Any] = (),
     ) -> None:
         self._sols = list(solutions)
         self.kind = kind
         self.info: dict[str, Any] = dict(info or {})
         self.seed = seed
+        #: 0 when every solution found is isolated, d >= 1 when some form a continuum of
+        #: dimension d (see :attr:`components`); None where the producer does not examine it
+        self.dimension = dimension
+        #: Positive-dimensional sets of solutions (:class:`optkin.solvers.continua.Component`:
+        #: ``dimension`` and sample configurations), apart from the isolated solutions
+        self.components = list(components)
 
     def __len__(self) -> int:
         return len(self._sols)
 
     def __getitem__(self, i):  # type: ignore[override]
         if isinstance(i, slice):
-            return SolutionSet(self._sols[i], self.kind, self.info, self.seed)
+            return SolutionSet(self._sols[i], self.kind, self.info, self.seed,
+                               self.dimension, self.components)
         return self._sols[i]
 
     def __iter__(self) -> Iterator[KinResult]:
@@ -212,6 +221,9 @@ class SolutionSet(Sequence):
         text = f"{len(self._sols)} {self.kind}, {near} near-singular"
         if any(s.certified is not None for s in self._sols):
             text += f", {sum(1 for s in self._sols if s.certified)} certified"
+        if self.components:
+            text += (f"; and {len(self.components)} continuum component(s) of dimension "
+                     + ", ".join(str(c.dimension) for c in self.components))
         return text
 
     def __repr__(self) -> str:
@@ -231,7 +243,8 @@ class SolutionSet(Sequence):
             raise MechanismError(f"max_cond: expected a number >= 1 (a condition number), got "
                                  f"{max_cond!r}")
         keep = [s for s in self._sols if not s.cond > max_cond]
-        return SolutionSet(keep, self.kind, self.info, self.seed)
+        return SolutionSet(keep, self.kind, self.info, self.seed, self.dimension,
+                           self.components)
 
     def closest_to(self, q: Sequence[float]) -> KinResult:
         """The solution whose ``q`` is nearest to ``q`` (angles not wrapped)."""
@@ -259,5 +272,8 @@ class SolutionSet(Sequence):
                 **head,
                 "info": self.info,
                 "solutions": [s.to_dict() for s in self._sols],
+                **({} if self.dimension is None else {
+                    "dimension": self.dimension,
+                    "components": [c.to_dict() for c in self.components]}),
             }
         )

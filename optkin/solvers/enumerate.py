@@ -141,6 +141,7 @@ ASSEMBLY_DEFAULTS: dict[str, Any] = {
     "dedup_tol": 1e-6,  # scaled distance under which two solutions are the same
     "rescue": 8,  # IPOPT rescues of stalled starts
     "certify": False,  # prove each mode by Krawczyk's test (optkin.solvers.certify)
+    "continua": True,  # look for solutions that are not isolated (optkin.solvers.continua)
     "jit": "auto",  # compile the step to C: True (wait for the compiler), False, "cached" (if
     # in the disk cache), "auto" ("cached" under 6 unknowns, else compiled in the background
     # while the first calls use the interpreted step)
@@ -626,6 +627,10 @@ def _assembly_options(opts: dict[str, Any], model: Model, given_time: bool = Tru
         raise MechanismError(f"{w}: option certify must be True or False, got "
                              f"{show(opts['certify'])}")
     o["certify"] = bool(opts["certify"])
+    if not isinstance(opts["continua"], (bool, np.bool_)):
+        raise MechanismError(f"{w}: option continua must be True or False, got "
+                             f"{show(opts['continua'])}")
+    o["continua"] = bool(opts["continua"])
     j = opts["jit"]
     if isinstance(j, (bool, np.bool_)):
         o["jit"] = bool(j)
@@ -1081,6 +1086,10 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             kr = make_result(model, qa, sols[:, k], tol, first_nit[k], stats)
         out.append(kr)
     hits_sorted = [hits[k] for k in order]
+    comps: list = []
+    if o["continua"] and (not out or any(not kr.cond <= _SINGULAR_COND for kr in out)):
+        out, hits_sorted, comps = _continua(model, qa, out, hits_sorted, starts, tol, dedup)
+    dimension = max((c.dimension for c in comps), default=0)
     if o["certify"] and out:
         from .certify import certify_point, mark_overlaps
 
@@ -1090,20 +1099,34 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             kr.stats.extra["certificate"] = c.message
         info["certified"] = sum(c.certified for c in certs)
     gt = _good_turing(hits_sorted, done)
-    complete = bound is not None and len(out) >= bound
+    # more isolated modes than the bound: some are not what the bound counts (points of a
+    # continuum that looked isolated, or duplicates); never called complete
+    complete = bound is not None and len(out) == bound and not comps
     msg = (f"{len(out)} assembly modes from {done} starts ({converged} converged); "
            + (f"complete: the known bound {bound} is reached" if complete else
               f"Good-Turing probability that a further start finds a new one: {gt['p_new']:.2g}"
               f" (99 % upper bound {gt['p_new_upper']:.2g})")
            + f"; stopped by {stop}")
+    if bound is not None and len(out) > bound:
+        msg += (f"; more than the known bound {bound}: not all are isolated solutions of a "
+                "generic mechanism")
     success = bool(out) and all(s.success for s in out)
-    if not out:
+    if comps:
+        n_s = sum(len(c.samples) for c in comps)
+        msg = ((f"{len(out)} isolated assembly modes" if out else "no isolated assembly mode")
+               + f" and {len(comps)} continuum component(s) of dimension "
+               + ", ".join(str(c.dimension) for c in comps)
+               + f" ({n_s} sample configurations in components): the solutions are not "
+               "isolated (a self-motion or an architecture singularity); " + msg)
+        success = all(s.success for s in out)
+        status = "singular"
+    elif not out:
         status = "iteration_limit" if stop == "time_limit" else "infeasible"
         tried = f"none of {done} starts closed the loops (stopped by {stop})"
         msg = (_NO_MODE + tried if stop != "time_limit" else
                "no closed configuration found for these actuated values within the time "
                f"limit: {tried}")
-    else:
+    elif out:
         status = "optimal" if success else "inaccurate"
     info.update({
         "success": success,
@@ -1123,8 +1146,65 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         "rescued": rescued,
         "excluded": excluded,
         "jit": compiled,
+        "dimension": dimension,
     })
-    return SolutionSet(out, "assembly modes", info, seed=int(seed))
+    return SolutionSet(out, "assembly modes", info, seed=int(seed), dimension=dimension,
+                       components=comps)
+
+
+#: Condition number of W_p above which a solution is examined for a continuum through it.
+_SINGULAR_COND = 1e8
+#: Starts projected by Gauss-Newton when Newton found nothing (a continuum stalls Newton).
+_CONTINUA_PROBES = 16
+#: Samples kept per dimension of continuum (each pair may be joined by projections).
+_CONTINUA_SAMPLES = 12
+
+
+def _continua(model: Model, qa: np.ndarray, out: list[KinResult], hits: list[int],
+              starts: _Starts, tol: float, dedup: float):
+    """Split the solutions into isolated ones and samples of continua (by
+    :func:`optkin.solvers.continua.local_dimension`); with no solution at all, project a
+    few more starts by Gauss-Newton of least norm, which reaches a continuum where Newton
+    stalls. Returns (isolated, their hits, components)."""
+    from .continua import Component, group, local_dimension, project
+
+    keep, keep_hits, pts = [], [], []
+    for kr, h in zip(out, hits):
+        d = local_dimension(model, qa, kr.x, tol) if not kr.cond <= _SINGULAR_COND else 0
+        if d:
+            pts.append((kr.x, d))
+        else:
+            keep.append(kr)
+            keep_hits.append(h)
+    if not out:
+        X = starts.take(_CONTINUA_PROBES)
+        for j in range(X.shape[1]):
+            y, _, ok = project(model, qa, X[:, j], tol)
+            if not ok:
+                continue
+            y = model.canonical_x(y)
+            d = local_dimension(model, qa, y, tol)
+            if d:
+                pts.append((y, d))
+                continue
+            if keep and np.min(_scaled_dist(model, np.array([k.x for k in keep]).T,
+                                            y[:, None])) < dedup:
+                continue
+            stats = SolverStats("gauss-newton", 0.0, 0.0, 0, "converged", {"hits": 1})
+            keep.append(make_result(model, qa, y, tol, 0, stats))
+            keep_hits.append(1)
+    comps = []
+    for d in sorted({d for _, d in pts}):
+        xs = [x for x, dd in pts if dd == d][:_CONTINUA_SAMPLES]
+        for idx in group(model, qa, xs, tol):
+            samples = []
+            for i in idx:
+                stats = SolverStats("continuum", 0.0, 0.0, 0, "converged", {"dimension": d})
+                kr = make_result(model, qa, xs[i], tol, 0, stats, status="singular",
+                                 message=f"on a continuum of solutions of dimension {d}")
+                samples.append(kr)
+            comps.append(Component(d, samples))
+    return keep, keep_hits, comps
 
 
 # ---------------------------------------------------------------------------------------------
