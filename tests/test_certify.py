@@ -122,8 +122,9 @@ def test_a_self_motion_is_not_certified():
     # solution, so none may be certified
     tri = [[0, 0], [1, 0], [0, 1]]
     m = optkin.mechanisms.rpr3(tri, tri)
-    modes = optkin.assembly_modes(m, [0.5, 0.5, 0.5], seed=0, starts=512)
-    on_circle = [r for r in modes
+    modes = optkin.assembly_modes(m, [0.5, 0.5, 0.5], seed=0, starts=512, certify=True)
+    assert modes.info["certified"] == len(modes)  # the isolated ones (the circle apart)
+    on_circle = [r for c in modes.components for r in c.samples
                  if abs(np.hypot(*r.x[:2]) - 0.5) < 1e-9 and abs(r.x[2]) < 1e-9]
     assert len(on_circle) >= 3
     model = get_model(m)
