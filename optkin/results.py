@@ -86,6 +86,47 @@ class SolverStats:
         )
 
 
+@dataclass(frozen=True)
+class EnumerationStats:
+    """The account of a search for every solution (``SolutionSet.stats``).
+
+    Attributes
+    ----------
+    method : str
+        ``"multistart"``: Newton from low-discrepancy starts (:func:`optkin.assembly_modes`).
+    paths : int
+        Starts (or homotopy paths) run to the end.
+    finite : int
+        Those that reached a solution.
+    at_infinity : int
+        Those that diverged (non-finite, or beyond 1000 mechanism sizes).
+    singular : int
+        Solutions found that are singular (cond(W_p) > 1e8) or lie on a continuum.
+    failed : int
+        The rest: stalled, or out of iterations.
+    root_count : int or None
+        The known bound on the number of solutions (None: unknown).
+    complete : bool
+        True only when every solution is accounted for: for ``"multistart"``, when the
+        number of isolated solutions found equals the known bound and no continuum was met.
+    """
+
+    method: str
+    paths: int
+    finite: int
+    at_infinity: int
+    singular: int
+    failed: int
+    root_count: int | None
+    complete: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"method": self.method, "paths": int(self.paths), "finite": int(self.finite),
+                "at_infinity": int(self.at_infinity), "singular": int(self.singular),
+                "failed": int(self.failed), "root_count": self.root_count,
+                "complete": bool(self.complete)}
+
+
 @dataclass
 class KinResult:
     """The outcome of one kinematic solve.
@@ -192,6 +233,7 @@ class SolutionSet(Sequence):
         seed: int | None = None,
         dimension: int | None = None,
         components: Sequence[Any] = (),
+        stats: EnumerationStats | None = None,
     ) -> None:
         self._sols = list(solutions)
         self.kind = kind
@@ -203,6 +245,15 @@ class SolutionSet(Sequence):
         #: Positive-dimensional sets of solutions (:class:`optkin.solvers.continua.Component`:
         #: ``dimension`` and sample configurations), apart from the isolated solutions
         self.components = list(components)
+        #: The account of the search (:class:`EnumerationStats`) where the producer keeps one
+        self.stats = stats
+
+    @property
+    def complete(self) -> bool:
+        """True when every solution is accounted for (:attr:`stats`; else ``info``)."""
+        if self.stats is not None:
+            return bool(self.stats.complete)
+        return bool(self.info.get("complete", False))
 
     def __len__(self) -> int:
         return len(self._sols)
@@ -210,7 +261,7 @@ class SolutionSet(Sequence):
     def __getitem__(self, i):  # type: ignore[override]
         if isinstance(i, slice):
             return SolutionSet(self._sols[i], self.kind, self.info, self.seed,
-                               self.dimension, self.components)
+                               self.dimension, self.components, self.stats)
         return self._sols[i]
 
     def __iter__(self) -> Iterator[KinResult]:
@@ -218,7 +269,11 @@ class SolutionSet(Sequence):
 
     def summary(self) -> str:
         near = sum(1 for s in self._sols if s.cond > 1e8)  # inf: singular (NaN: not known)
-        text = f"{len(self._sols)} {self.kind}, {near} near-singular"
+        text = f"{len(self._sols)} {self.kind}"
+        conv, starts = self.info.get("converged"), self.info.get("starts")
+        if isinstance(conv, int) and isinstance(starts, int) and starts > 0:
+            text += f" ({conv} of {starts} starts converged)"
+        text += f", {near} near-singular"
         if any(s.certified is not None for s in self._sols):
             text += f", {sum(1 for s in self._sols if s.certified)} certified"
         if self.components:
@@ -244,7 +299,7 @@ class SolutionSet(Sequence):
                                  f"{max_cond!r}")
         keep = [s for s in self._sols if not s.cond > max_cond]
         return SolutionSet(keep, self.kind, self.info, self.seed, self.dimension,
-                           self.components)
+                           self.components, self.stats)
 
     def closest_to(self, q: Sequence[float]) -> KinResult:
         """The solution whose ``q`` is nearest to ``q`` (angles not wrapped)."""
@@ -272,6 +327,8 @@ class SolutionSet(Sequence):
                 **head,
                 "info": self.info,
                 "solutions": [s.to_dict() for s in self._sols],
+                **({} if self.stats is None else {"stats": self.stats.to_dict(),
+                                                  "complete": bool(self.stats.complete)}),
                 **({} if self.dimension is None else {
                     "dimension": self.dimension,
                     "components": [c.to_dict() for c in self.components]}),

@@ -109,3 +109,19 @@ def test_continua_option_is_validated():
         optkin.assembly_modes(m, [0.5, 0.5, 0.5], continua=1)
     plain = optkin.assembly_modes(m, [0.5, 0.5, 0.5], continua=False)
     assert plain.components == [] and plain.info["complete"] is False  # > bound: not complete
+
+
+def test_the_account_is_typed_and_adds_up():
+    m = optkin.mechanisms.rpr3([[0, 0], [1, 0], [0.3, 0.9]], [[0, 0], [0.25, 0], [0.1, 0.2]])
+    modes = optkin.assembly_modes(m, [0.6, 0.7, 0.65])
+    st = modes.stats
+    assert isinstance(st, optkin.results.EnumerationStats) and st.method == "multistart"
+    assert st.paths == modes.info["starts"] and st.finite == modes.info["converged"]
+    assert st.paths == st.finite + st.at_infinity + st.failed
+    assert st.root_count == 6 and st.singular == 0
+    assert modes.complete is st.complete is modes.info["complete"] is False  # 2 of 6 real
+    assert "converged" in modes.summary() and modes.to_dict()["stats"]["method"] == "multistart"
+    # a continuum: singular samples counted, never complete
+    circle = optkin.assembly_modes(optkin.mechanisms.rpr3(TRI, TRI), [0.5, 0.5, 0.5])
+    n_samples = sum(len(c.samples) for c in circle.components)
+    assert circle.stats.singular >= n_samples > 0 and circle.complete is False

@@ -74,7 +74,8 @@ def project(model, qa: np.ndarray, x: np.ndarray, tol: float, iters: int = 60,
     """
     x = np.array(x, dtype=float)
     scale = model.x_scale
-    res = np.inf
+    res = best = np.inf
+    slow = 0
     for _ in range(iters):
         phi, J = _scaled_jac(model, qa, x)
         res = float(np.max(np.abs(phi))) if phi.size else 0.0
@@ -82,6 +83,11 @@ def project(model, qa: np.ndarray, x: np.ndarray, tol: float, iters: int = 60,
             return x, res, False
         if res <= tol:
             return x, res, True
+        # stalled at a least-squares point that is not a solution (out of reach)
+        slow = slow + 1 if res > 0.9 * best else 0
+        best = min(best, res)
+        if slow >= 4:
+            return x, res, False
         dz = np.linalg.lstsq(J, -phi, rcond=1e-10)[0]
         nrm = float(np.linalg.norm(dz))
         if nrm > step_max:

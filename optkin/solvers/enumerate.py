@@ -104,7 +104,7 @@ from ..mechanism import Mechanism
 from ..model import Model, get_model
 from ..model import enumeration as _enum
 from ..model.compiled import FastFn
-from ..results import KinResult, SolutionSet, SolverStats
+from ..results import EnumerationStats, KinResult, SolutionSet, SolverStats
 from .common import (
     check_mechanism,
     check_qa,
@@ -765,7 +765,17 @@ def poisson_upper(k: int) -> float:
     return m
 
 
-def _good_turing(hits: Sequence[int], starts: int) -> dict[str, Any]:
+def draws(converged: int, starts: int) -> int:
+    """The draws the Good-Turing figures count: the converged starts (a start that does
+    not converge draws no mode); with none converged, the starts (then p_new_upper is the
+    rule of three over them: no solution is found by a further start with probability
+    >= 1 - 4.6 / n)."""
+    return converged if converged else starts
+
+
+def _good_turing(hits: Sequence[int], draws: int) -> dict[str, Any]:
+    """Good-Turing figures over ``draws`` converged starts (each a draw of a mode)."""
+    starts = draws
     h = np.asarray(hits, dtype=int)
     f1 = int(np.sum(h == 1))
     f2 = int(np.sum(h == 2))
@@ -829,12 +839,14 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         ``kind="assembly modes"``, sorted by the unknowns x. Each :class:`KinResult` carries
         its residual, the condition number of W_p (``cond``) and in ``stats.extra["hits"]``
         how many starts converged to it. ``info`` holds the account: ``starts`` (starts run
-        to the end), ``converged``, ``hits`` (per solution), ``singletons`` (N1), ``p_new``
-        (the Good-Turing estimate N1 / n of the probability that a further start finds a new
-        solution), ``p_new_upper`` (a conservative bound on it: u(N1) / n, u(k) the one-sided
-        99 % upper confidence limit of a Poisson mean from k events, chi2.ppf(0.99, 2k+2)/2;
-        4.6 / n, the rule of three at 99 %, when N1 = 0: a mode whose basin holds a share
-        p >= 4.6 / n of the starts is missed by all n with probability <= 1 %),
+        to the end), ``converged`` (n), ``hits`` (per solution), ``singletons`` (N1),
+        ``p_new`` (the Good-Turing estimate N1 / n of the probability that the next
+        converged start lands on a new solution: over converged starts, since those that do
+        not converge draw no mode), ``p_new_upper`` (a conservative bound on it: u(N1) / n,
+        u(k) the one-sided 99 % upper confidence limit of a Poisson mean from k events,
+        chi2.ppf(0.99, 2k+2)/2; 4.6 / n, the rule of three at 99 %, when N1 = 0: a mode
+        drawn by a share p >= 4.6 / n of the converging starts is missed by all n with
+        probability <= 1 %),
         ``estimated_total`` (Chao1), ``bound`` and ``complete`` (True when the count reached
         the known bound), ``stop_reason``, ``time`` and ``setup_time`` (compilation);
         ``success``, ``status`` and ``message`` (also at the top level of ``to_dict()``):
@@ -911,8 +923,9 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
                      "singletons": 0,
                      "doubletons": 0, "estimated_total": 0.0, "complete": True,
                      "stop_reason": "infeasible", "time": timer() - t_start,
-                     "setup_time": 0.0, "rescued": 0, "jit": False})
-        return SolutionSet([], "assembly modes", info, seed=int(seed))
+                     "setup_time": 0.0, "rescued": 0, "jit": False, "dimension": 0})
+        return SolutionSet([], "assembly modes", info, seed=int(seed), dimension=0,
+                           stats=EnumerationStats("multistart", 0, 0, 0, 0, 0, bound, True))
 
     step_max = o["step_max"]
     if step_max == "auto":
@@ -934,6 +947,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     n_once = 0
     total_iter = 0
     excluded = 0
+    diverged = 0
     excl_res = 1e-5 * max(1.0, model.length)
     excl_dist = 1e-3
     nn = np.zeros(0)  # distance of each solution to its nearest other solution
@@ -966,8 +980,9 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             excluded += int(inside.sum())
         else:
             excluded_now = None
-        bad = live & ~conv & (~finite | np.any(np.abs(Xn) > big, axis=0) | (it >= max_iter)
-                              | ((it >= stall_iter) & (r > stall_res)))
+        away = ~finite | np.any(np.abs(Xn) > big, axis=0)
+        bad = live & ~conv & (away | (it >= max_iter) | ((it >= stall_iter) & (r > stall_res)))
+        diverged += int(np.count_nonzero(bad & away))
         if conv.any():
             idx = np.flatnonzero(conv)
             C = _canon(model, Xn[:, idx])
@@ -1011,7 +1026,8 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             stop = "bound"
         elif (done >= (min_starts if bound is None or (len(hits) - bound) % 2 == 0
                        else 4 * min_starts)
-              and n_once <= target * done and poisson_upper(n_once) <= target_upper * done):
+              and n_once <= target * draws(converged, done)
+              and poisson_upper(n_once) <= target_upper * draws(converged, done)):
             # with a known bound (an even number of complex solutions), an odd count means a
             # mode is still missing (non-real solutions come in conjugate pairs), unless a
             # degenerate case has a double root: run four times longer before stopping.
@@ -1098,7 +1114,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
             kr.certified = c.certified
             kr.stats.extra["certificate"] = c.message
         info["certified"] = sum(c.certified for c in certs)
-    gt = _good_turing(hits_sorted, done)
+    gt = _good_turing(hits_sorted, draws(converged, done))
     # more isolated modes than the bound: some are not what the bound counts (points of a
     # continuum that looked isolated, or duplicates); never called complete
     complete = bound is not None and len(out) == bound and not comps
@@ -1148,8 +1164,12 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         "jit": compiled,
         "dimension": dimension,
     })
+    n_sing = sum(1 for kr in out if not kr.cond <= _SINGULAR_COND)
+    n_sing += sum(len(c.samples) for c in comps)
+    account = EnumerationStats("multistart", done, converged, diverged, n_sing,
+                               max(0, done - converged - diverged), bound, complete)
     return SolutionSet(out, "assembly modes", info, seed=int(seed), dimension=dimension,
-                       components=comps)
+                       components=comps, stats=account)
 
 
 #: Condition number of W_p above which a solution is examined for a continuum through it.
