@@ -145,7 +145,7 @@ ASSEMBLY_OPTS = {
     "max_iter": st.integers(1, 100), "step_max": st.one_of(st.just("auto"), st.floats(0.01, 2)),
     "dedup_tol": st.floats(0, 1e-3), "rescue": st.integers(0, 20),
     "jit": st.sampled_from([True, False, "auto", "cached"]), "threads": st.integers(1, 8),
-    "certify": st.booleans(), "continua": st.booleans(),
+    "certify": st.booleans(), "continua": st.booleans(), "method": st.just("multistart"),
 }
 TRACK_OPTS = {
     "tol": pos, "max_iter": st.integers(1, 20), "min_step": st.floats(1e-6, 0.5),

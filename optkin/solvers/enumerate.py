@@ -142,6 +142,7 @@ ASSEMBLY_DEFAULTS: dict[str, Any] = {
     "rescue": 8,  # IPOPT rescues of stalled starts
     "certify": False,  # prove each mode by Krawczyk's test (optkin.solvers.certify)
     "continua": True,  # look for solutions that are not isolated (optkin.solvers.continua)
+    "method": "multistart",  # or "homotopy": parameter homotopy (optkin.solvers.homotopy)
     "jit": "auto",  # compile the step to C: True (wait for the compiler), False, "cached" (if
     # in the disk cache), "auto" ("cached" under 6 unknowns, else compiled in the background
     # while the first calls use the interpreted step)
@@ -631,6 +632,10 @@ def _assembly_options(opts: dict[str, Any], model: Model, given_time: bool = Tru
         raise MechanismError(f"{w}: option continua must be True or False, got "
                              f"{show(opts['continua'])}")
     o["continua"] = bool(opts["continua"])
+    if opts["method"] not in ("multistart", "homotopy"):
+        raise MechanismError(f"{w}: option method must be 'multistart' or 'homotopy', got "
+                             f"{show(opts['method'])}")
+    o["method"] = opts["method"]
     j = opts["jit"]
     if isinstance(j, (bool, np.bool_)):
         o["jit"] = bool(j)
@@ -875,6 +880,20 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     _check_size_of(model, "assembly_modes")
     qa = _qa_arg(model, qa)
     o = _assembly_options(opts, model, "time_limit" in options)
+    if o["method"] == "homotopy":
+        checkpoint()
+        from .homotopy import homotopy_modes
+
+        modes = homotopy_modes(mech, qa, seed=int(seed), tol=o["tol"])
+        if o["certify"] and len(modes):
+            from .certify import certify_point, mark_overlaps
+
+            certs = mark_overlaps([certify_point(model, qa, kr.x) for kr in modes])
+            for kr, c in zip(modes, certs):
+                kr.certified = c.certified
+                kr.stats.extra["certificate"] = c.message
+            modes.info["certified"] = sum(c.certified for c in certs)
+        return modes
     t_start = timer()
     tol = o["tol"]
     nx = model.nx

@@ -1,0 +1,390 @@
+"""Every assembly mode by parameter homotopy, from start systems found by monodromy.
+
+A first, uncompiled version of the method of Sommese and Wampler (2005), ch. 7 and 18
+(parameter homotopies, the gamma trick) and Duff et al. (2019, monodromy), for the closure
+of any square model:
+
+* the system. The closure rows ``sqrt(u) - v`` of distance legs become ``u - v^2`` (the
+  same real solutions, no branch cut); with the actuated values q_a, the geometry p and an
+  offset c as parameters theta = (q_a, p, c), H(x; theta) = F(x; q_a, p) - c. Its value, its
+  Jacobian in x and its derivative along a direction of theta are one CasADi Function,
+  made complex by :func:`optkin.model.complexify.complexify` and mapped over the paths.
+* start systems by monodromy. At random complex parameters theta_0 (c_0 = F(x_0; q_a0, p_0)
+  for a random complex x_0, which is then a solution by construction), the solutions are
+  grown by loops theta_0 -> theta_1 -> theta_2 -> theta_0 through random complex
+  parameters: each loop permutes the solutions, and new endpoints are new solutions. The
+  loops stop after ``stale`` loops in a row that found nothing (a heuristic: the trace test
+  is not implemented yet), or at ``max_loops``. Solutions are identified modulo 2 pi in
+  the real part of each angle and up to the sign of a quaternion.
+* the parameter homotopy. From theta_0 to the target (q_a, p, 0) along
+  theta_0 + s(t) (theta_1 - theta_0), s(t) = gamma t / (1 + (gamma - 1) t) with a random
+  complex gamma (which keeps the path away from the discriminant with probability one),
+  every path is tracked by an RK4 predictor and a Newton corrector with adaptive steps;
+  a path that grows beyond 1e8 (scaled) near the target (t >= 0.99) goes to infinity;
+  one that does so earlier, or whose step falls below 1e-12, fails, and then every path is
+  tracked again along another gamma (up to three in all). Endpoints with negligible imaginary parts are polished by the real
+  model's Newton step and returned as :class:`~optkin.results.KinResult`.
+
+The account: every path ends finite, at infinity, singular or failed; ``complete`` only when
+none failed and no two finite nonsingular endpoints coincide (path jumping). Not yet here:
+compiled tracking, endgames (a singular endpoint is only reported), the trace test, start
+systems stored on disk; see the issue tracker.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ..errors import MechanismError
+from ..results import EnumerationStats, KinResult, SolutionSet, SolverStats
+
+__all__ = ["StartSystem", "start_system", "homotopy_modes"]
+
+
+# ---------------------------------------------------------------------------------------
+# the system H(x; theta) = F(x; q_a, p) - c, complex and mapped
+# ---------------------------------------------------------------------------------------
+
+def _squared(e: ca.SX) -> ca.SX:
+    """A closure row ``sqrt(u) - v`` as ``u - v^2``; other rows unchanged."""
+    if e.is_op(ca.OP_SUB) and e.n_dep() == 2 and e.dep(0).is_op(ca.OP_SQRT):
+        return e.dep(0).dep(0) - e.dep(1) ** 2
+    return e
+
+
+class _System:
+    def __init__(self, model) -> None:
+        from ..model.complexify import complexify
+
+        topo = model.topology
+        st = topo.st
+        if topo.m != topo.nx:
+            raise MechanismError(
+                f"homotopy: the closure has {topo.m} equations for {topo.nx} unknowns; the "
+                "homotopy needs a square system (use method='multistart')")
+        rows = [_squared(topo.phi_sym[i]) for i in range(topo.m)]
+        F = ca.vertcat(*rows)
+        self.n, self.na = topo.nx, topo.na
+        # only the geometry entries the closure reads are parameters (a 6-6 platform's
+        # geometry vector has 349 entries, its leg equations read 36)
+        used = np.array([i for i in range(st.p.shape[0]) if ca.depends_on(F, st.p[i])], int)
+        self.p_used = used
+        self.np_ = int(used.size)
+        c = ca.SX.sym("c", topo.m)
+        th = ca.vertcat(st.qa, *[st.p[int(i)] for i in used], c)
+        self.nth = int(th.shape[0])
+        dth = ca.SX.sym("dth", self.nth)
+        H = F - c
+        Jx = ca.densify(ca.jacobian(H, st.x))
+        Ht = ca.jtimes(H, th, dth)
+        f = ca.Function("homotopy", [st.x, th, dth], [ca.densify(H), Jx, ca.densify(Ht)],
+                        ["x", "th", "dth"], ["H", "Jx", "Ht"])
+        self.f = complexify(f)
+        from ..model import compiled as cc
+
+        lib = cc.library(f"homotopy:{topo.key}", [self.f])  # None: no compiler, interpreted
+        self.compiled = lib is not None
+        if lib is not None:
+            self.f = lib[self.f.name()]
+        self._maps: dict[int, ca.Function] = {}
+        self.scale = np.asarray(model.x_scale, dtype=float)
+
+    def eval(self, X: np.ndarray, TH: np.ndarray, DTH: np.ndarray):
+        """H (N, n), Jx (N, n, n), Ht (N, n) at the N rows of X, TH, DTH (complex)."""
+        N = X.shape[0]
+        fm = self._maps.get(N)
+        if fm is None:
+            fm = self._maps[N] = self.f.map(N)
+        out = fm(X.real.T, X.imag.T, TH.real.T, TH.imag.T, DTH.real.T, DTH.imag.T)
+        Hr, Hi, Jr, Ji, Tr, Ti = (np.asarray(v, dtype=float) for v in out)
+        n = self.n
+        H = (Hr + 1j * Hi).T
+        J = (Jr + 1j * Ji).reshape(n, N, n).transpose(1, 0, 2)
+        Ht = (Tr + 1j * Ti).T
+        return H, J, Ht
+
+
+def _system(model) -> _System:
+    return model.topology.cached("homotopy:system", lambda: _System(model))
+
+
+# ---------------------------------------------------------------------------------------
+# path tracking
+# ---------------------------------------------------------------------------------------
+
+@dataclass
+class _Paths:
+    x: np.ndarray  # (N, n) endpoints
+    status: np.ndarray  # (N,) "finite", "at_infinity", "failed"
+    cond: np.ndarray  # (N,) condition number of Jx at the endpoint
+    t: np.ndarray  # (N,) where each path stopped (1: at the target)
+    steps: int  # loop iterations (steps of the slowest path)
+
+
+def _solve(J: np.ndarray, b: np.ndarray) -> np.ndarray:
+    try:
+        return np.linalg.solve(J, b[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        out = np.full_like(b, np.nan)
+        for k in range(J.shape[0]):
+            try:
+                out[k] = np.linalg.solve(J[k], b[k])
+            except np.linalg.LinAlgError:
+                pass
+        return out
+
+
+def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
+          gamma: complex, tol: float = 1e-10, h0: float = 0.02, hmax: float = 0.1,
+          hmin: float = 1e-12, big: float = 1e8, max_steps: int = 5000,
+          accept_tol: float = 1e-6) -> _Paths:
+    """Track the solutions X0 (N, n) of H(.; th0) to H(.; th1) along the gamma path."""
+    N, n = X0.shape
+    sc = sys.scale
+    d = th1 - th0
+
+    def theta(t):
+        s = gamma * t / (1 + (gamma - 1) * t)
+        ds = gamma / (1 + (gamma - 1) * t) ** 2
+        return th0[None, :] + s[:, None] * d[None, :], ds[:, None] * d[None, :]
+
+    def rhs(X, t):
+        TH, DTH = theta(t)
+        _, J, Ht = sys.eval(X, TH, DTH)
+        return -_solve(J, Ht)
+
+    X = X0.astype(complex).copy()
+    t = np.zeros(N)
+    h = np.full(N, h0)
+    status = np.array(["running"] * N, dtype=object)
+    steps = 0
+    while True:
+        act = np.flatnonzero(status == "running")
+        if act.size == 0 or steps >= max_steps:
+            break
+        steps += 1
+        Xa, ta = X[act], t[act]
+        ha = np.minimum(h[act], 1.0 - ta)
+        # RK4 predictor
+        k1 = rhs(Xa, ta)
+        k2 = rhs(Xa + 0.5 * ha[:, None] * k1, ta + 0.5 * ha)
+        k3 = rhs(Xa + 0.5 * ha[:, None] * k2, ta + 0.5 * ha)
+        k4 = rhs(Xa + ha[:, None] * k3, ta + ha)
+        Xp = Xa + (ha[:, None] / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+        tn = ta + ha
+        # Newton corrector: three iterations, contracting
+        TH, DTH = theta(tn)
+        ok = np.all(np.isfinite(Xp), axis=1)
+        prev = np.full(act.size, np.inf)
+        # updates relative to the size of the point (complex solutions may be far out)
+        size = 1.0 + np.max(np.abs(np.where(ok[:, None], Xp, 0)) / sc, axis=1)
+        for _ in range(3):
+            H, J, _ = sys.eval(np.where(ok[:, None], Xp, 0), TH, DTH)
+            dx = _solve(J, H)
+            nrm = np.max(np.abs(dx) / sc, axis=1) / size
+            ok &= np.isfinite(nrm) & (nrm <= np.maximum(0.5 * prev, 1e-9))
+            Xp = Xp - np.where(ok[:, None], dx, 0)
+            prev = np.where(np.isfinite(nrm), nrm, np.inf)
+        small = np.max(np.abs(Xa - Xp) / sc, axis=1)
+        accept = ok & (prev <= accept_tol) & (small <= 0.5 + 0.5 * np.abs(Xa).max(axis=1))
+        idx = act[accept]
+        X[idx], t[idx] = Xp[accept], tn[accept]
+        h[idx] = np.minimum(h[idx] * 2.0, hmax)
+        rej = act[~accept]
+        h[rej] *= 0.5
+        # only near the target can a path go to infinity (before it, the parameters are
+        # generic): a path that swings far out earlier has failed (another gamma)
+        far = np.max(np.abs(X[act]) / sc, axis=1) > big
+        status[act[far & (t[act] >= 0.99)]] = "at_infinity"
+        status[act[far & (t[act] < 0.99)]] = "failed"
+        status[rej[h[rej] < hmin]] = "failed"
+        status[act[(t[act] >= 1.0) & (status[act] == "running")]] = "finite"
+    status[status == "running"] = "failed"
+    cond = np.full(N, np.inf)
+    fin = np.flatnonzero(status == "finite")
+    if fin.size:
+        TH = np.repeat(th1[None, :], fin.size, axis=0)
+        Xf = X[fin]
+        for _ in range(3):  # polish at the target
+            H, J, _ = sys.eval(Xf, TH, np.zeros_like(TH))
+            dx = _solve(J, H)
+            good = np.all(np.isfinite(dx), axis=1)
+            Xf = Xf - np.where(good[:, None], dx, 0)
+        _, J, _ = sys.eval(Xf, TH, np.zeros_like(TH))
+        X[fin] = Xf
+        with np.errstate(all="ignore"):
+            cond[fin] = np.linalg.cond(J * sc[None, None, :])
+    return _Paths(X, status, cond, t, steps)
+
+
+# ---------------------------------------------------------------------------------------
+# identification of solutions
+# ---------------------------------------------------------------------------------------
+
+def _canonical(model, X: np.ndarray) -> np.ndarray:
+    from ..model import enumeration as _enum
+
+    lay = _enum.layout(model)
+    X = X.copy()
+    ang = np.flatnonzero(getattr(lay, "angle", np.zeros(model.nx, bool)))
+    if ang.size:
+        X[:, ang] = (np.mod(X[:, ang].real + np.pi, 2 * np.pi) - np.pi) + 1j * X[:, ang].imag
+    q = np.asarray(getattr(lay, "quat", np.zeros(0, int)), dtype=int)
+    if q.size == 4:
+        Q = X[:, q]
+        k = np.argmax(np.abs(Q), axis=1)
+        sign = np.where(Q[np.arange(len(Q)), k].real < 0, -1.0, 1.0)
+        X[:, q] = Q * sign[:, None]
+    return X
+
+
+def _distinct(model, S: np.ndarray, Y: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """Rows of Y (canonical) not within tol (scaled) of a row of S or an earlier row of Y."""
+    sc = np.asarray(model.x_scale, dtype=float)
+    keep = []
+    pool = list(S)
+    for y in Y:
+        if all(np.max(np.abs(y - s) / sc) > tol for s in pool):
+            keep.append(y)
+            pool.append(y)
+    return np.array(keep).reshape(-1, Y.shape[1])
+
+
+# ---------------------------------------------------------------------------------------
+# start systems by monodromy
+# ---------------------------------------------------------------------------------------
+
+@dataclass
+class StartSystem:
+    """Random complex parameters ``theta`` = (q_a, p, c) and all the solutions found there
+    (``solutions``, one row each), with how they were found."""
+
+    theta: np.ndarray
+    solutions: np.ndarray
+    loops: int
+    time: float
+
+    @property
+    def root_count(self) -> int:
+        return int(self.solutions.shape[0])
+
+
+def _random_theta(sys: _System, model, rng, c: np.ndarray | None = None) -> np.ndarray:
+    p = np.asarray(model.p, dtype=float)[sys.p_used]
+    size = float(model.length)
+    qa = size * (rng.normal(size=sys.na) + 1j * rng.normal(size=sys.na))
+    pp = p + (np.abs(p) + 0.1 * size) * (rng.normal(size=p.size) + 1j * rng.normal(size=p.size))
+    if c is None:
+        c = size * (rng.normal(size=sys.n) + 1j * rng.normal(size=sys.n))
+    return np.concatenate([qa, pp, c])
+
+
+def start_system(model, seed: int = 0, stale: int = 3, max_loops: int = 40) -> StartSystem:
+    """Monodromy: one solution by construction, grown by random loops (module docstring)."""
+    t0 = time.perf_counter()
+    sys = _system(model)
+    rng = np.random.default_rng([int(seed), 7])
+    sc = sys.scale
+    x0 = sc * (rng.normal(size=sys.n) + 1j * rng.normal(size=sys.n))
+    th = _random_theta(sys, model, rng, c=np.zeros(sys.n))
+    H, _, _ = sys.eval(x0[None, :], th[None, :], np.zeros((1, sys.nth)))
+    th[-sys.n:] = H[0]  # with c = 0, H(x0) = F(x0): c0 = F(x0) makes x0 a solution
+    S = _canonical(model, x0[None, :])
+    quiet = loops = 0
+    while quiet < stale and loops < max_loops:
+        loops += 1
+        th1, th2 = _random_theta(sys, model, rng), _random_theta(sys, model, rng)
+        Y = S
+        for a, b in ((th, th1), (th1, th2), (th2, th)):
+            g = np.exp(2j * np.pi * rng.uniform())
+            P = track(sys, Y, a, b, g)
+            Y = P.x[P.status == "finite"]
+            if Y.size == 0:
+                break
+        new = _distinct(model, S, _canonical(model, Y)) if Y.size else np.zeros((0, sys.n))
+        if new.shape[0]:
+            S = np.vstack([S, new])
+            quiet = 0
+        else:
+            quiet += 1
+    return StartSystem(th, S, loops, time.perf_counter() - t0)
+
+
+# ---------------------------------------------------------------------------------------
+# assembly modes by parameter homotopy
+# ---------------------------------------------------------------------------------------
+
+def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = None,
+                   tol: float = 1e-10) -> SolutionSet:
+    """Every real assembly mode of ``mech`` at ``qa`` by parameter homotopy (see the
+    module docstring). ``start`` defaults to the topology's start system for ``seed``
+    (built by monodromy on first use and kept for the process)."""
+    from ..model import get_model
+    from .common import check_mechanism, check_qa, make_result, newton
+
+    check_mechanism(mech, "homotopy")
+    model = get_model(mech)
+    qa = check_qa(model, qa)
+    t0 = time.perf_counter()
+    sys = _system(model)
+    if start is None:
+        start = model.topology.cached(("homotopy:start", int(seed)),
+                                      lambda: start_system(model, seed))
+    t_start = time.perf_counter()
+    target = np.concatenate([qa, np.asarray(model.p, dtype=float)[sys.p_used],
+                             np.zeros(sys.n)]).astype(complex)
+    rng = np.random.default_rng([int(seed), 11])
+    # every path along one gamma path (which start goes to which end depends on it); a
+    # path that fails (one that swings far out near parameters where a solution goes to
+    # infinity) sends all of them along another gamma, up to ``tries`` times
+    P, tries = None, 0
+    while tries < 3:
+        tries += 1
+        gamma = np.exp(2j * np.pi * rng.uniform())
+        Q = track(sys, start.solutions, start.theta, target, gamma, tol=tol)
+        if P is None or np.sum(Q.status == "failed") < np.sum(P.status == "failed"):
+            P = Q
+        if not np.any(P.status == "failed"):
+            break
+    sc = sys.scale
+    fin = np.flatnonzero(P.status == "finite")
+    Xf = _canonical(model, P.x[fin])
+    singular = P.cond[fin] > 1e10
+    # path jumping: two nonsingular endpoints at one point
+    ns = Xf[~singular]
+    jumped = ns.shape[0] - _distinct(model, np.zeros((0, sys.n)), ns, 1e-8).shape[0]
+    real = np.max(np.abs(Xf.imag) / sc, axis=1) < 1e-6
+    out: list[KinResult] = []
+    seen: list[np.ndarray] = []
+    for x in Xf[real & ~singular].real:
+        x1, _, nit, ok = newton(model, qa, x, tol, 8)
+        if not ok:
+            continue
+        x1 = model.canonical_x(x1)
+        if any(np.max(np.abs(x1 - s) / sc) < 1e-6 for s in seen):
+            continue
+        seen.append(x1)
+        stats = SolverStats("parameter-homotopy", start.time, time.perf_counter() - t_start,
+                            nit, "converged", {"paths": start.root_count})
+        out.append(make_result(model, qa, x1, tol, nit, stats))
+    out.sort(key=lambda r: tuple(np.round(r.x / sc, 9)))
+    n_fail = int(np.sum(P.status == "failed"))
+    n_inf = int(np.sum(P.status == "at_infinity"))
+    complete = n_fail == 0 and jumped == 0
+    account = EnumerationStats("homotopy", start.root_count, int(fin.size), n_inf,
+                               int(singular.sum()), n_fail, start.root_count, complete)
+    msg = (f"{len(out)} real assembly modes from {start.root_count} paths: {fin.size} "
+           f"finite ({int(singular.sum())} singular), {n_inf} at infinity, {n_fail} failed"
+           + (f", {jumped} path jumps" if jumped else "")
+           + ("; every path accounted for" if complete else "; not every path accounted for"))
+    info = {"success": bool(out), "status": "optimal" if out else "infeasible",
+            "message": msg, "complete": complete, "root_count": start.root_count,
+            "monodromy_loops": start.loops, "start_time": start.time, "gamma_tries": tries,
+            "time": time.perf_counter() - t0, "method": "homotopy"}
+    return SolutionSet(out, "assembly modes", info, seed=int(seed), dimension=None,
+                       stats=account)

@@ -1,0 +1,99 @@
+"""Parameter homotopy from monodromy start systems (optkin.solvers.homotopy).
+
+Evidence: the 3-RPR's real modes against the elimination written in
+tests/test_assembly_modes.py (a sextic in tan(phi/2)), and its generic root count 6 (the
+degree of that polynomial); Dietmaier's 6-6 platform (40 real postures, the published
+number; 40 = the generic root count of a 6-6 platform, Raghavan 1993); the five-bar against
+circle intersections; every path accounted for.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_assembly_modes import _matches, five_bar_reference, rpr_reference
+
+import optkin
+from optkin.model import get_model
+from optkin.solvers import homotopy as H
+
+DIET_A = np.array([[0, 0, 0], [1.107915, 0, 0], [0.549094, 0.756063, 0],
+                   [0.735077, -0.223935, 0.525991], [0.514188, -0.526063, -0.368418],
+                   [0.590473, 0.094733, -0.205018]])
+DIET_B = np.array([[0, 0, 0], [0.542805, 0, 0], [0.956919, -0.528915, 0],
+                   [0.665885, -0.353482, 1.402538], [0.478359, 1.158742, 0.107672],
+                   [-0.137087, -0.235121, 0.353913]])
+DIET_L = np.array([1, 0.645275, 1.086284, 1.503439, 1.281933, 0.771071])
+
+
+def _rot2(phi):
+    c, s = np.cos(phi), np.sin(phi)
+    return np.array([[c, -s], [s, c]])
+
+
+def test_3rpr_random_instances_match_the_elimination():
+    rng = np.random.default_rng(21)
+    done = 0
+    for trial in range(12):
+        a, b = rng.uniform(-10, 10, (3, 2)), rng.uniform(-4, 4, (3, 2))
+        x = np.array([*rng.uniform(-3, 3, 2), rng.uniform(-np.pi, np.pi)])
+        s = np.linalg.norm(x[:2] + (_rot2(x[2]) @ b.T).T - a, axis=1)
+        ref, ambiguous = rpr_reference(a, b, s)
+        if ambiguous:
+            continue
+        modes = optkin.assembly_modes(optkin.mechanisms.rpr3(a, b), s, method="homotopy")
+        assert modes.stats.method == "homotopy" and modes.stats.root_count == 6
+        assert modes.complete and modes.stats.failed == 0, modes.info["message"]
+        assert modes.stats.paths == modes.stats.finite + modes.stats.at_infinity
+        assert _matches([r.x for r in modes], ref), (trial, len(modes), len(ref))
+        done += 1
+    assert done >= 10
+
+
+def test_dietmaier_all_40_by_homotopy():
+    m = optkin.mechanisms.stewart_gough(DIET_A, DIET_B)
+    modes = optkin.assembly_modes(m, DIET_L, method="homotopy", certify=True)
+    assert len(modes) == 40 and modes.stats.root_count == 40
+    assert modes.complete and modes.stats.failed == 0 and modes.stats.finite == 40
+    assert modes.info["certified"] == 40
+    ref = optkin.assembly_modes(m, DIET_L)
+    for r in modes:  # the same poses as the multistart's
+        assert min(np.max(np.abs(r.pose - q.pose)) for q in ref) < 1e-8
+
+
+def test_five_bar_against_circle_intersections():
+    rng = np.random.default_rng(3)
+    seen = 0
+    for _ in range(8):
+        L = rng.uniform(0.5, 2.0, 5)
+        th = rng.uniform(-np.pi, np.pi, 2)
+        ref, _, _ = five_bar_reference(L, *th)
+        if ref is None:
+            continue
+        modes = optkin.assembly_modes(optkin.mechanisms.five_bar(*L), th, method="homotopy")
+        assert modes.complete, modes.info["message"]
+        got = [r.x for r in modes]
+        assert len(got) == len(ref)
+        for p in ref:
+            assert min(np.max(np.abs(g - p)) for g in got) < 1e-8
+        seen += 1
+    assert seen >= 5
+
+
+def test_start_system_solutions_solve_their_system():
+    m = optkin.mechanisms.rpr3([[0, 0], [1, 0], [0.3, 0.9]], [[0, 0], [0.25, 0], [0.1, 0.2]])
+    model = get_model(m)
+    S = H.start_system(model, seed=4)
+    assert S.root_count == 6
+    sys = H._system(model)
+    n = S.solutions.shape[0]
+    Hv, J, _ = sys.eval(S.solutions, np.repeat(S.theta[None], n, 0),
+                        np.zeros((n, sys.nth), complex))
+    assert np.max(np.abs(Hv)) < 1e-8
+    assert np.min(np.abs(np.linalg.det(J))) > 1e-8  # nonsingular: isolated
+
+
+def test_method_is_validated():
+    m = optkin.mechanisms.rpr3([[0, 0], [1, 0], [0.3, 0.9]], [[0, 0], [0.25, 0], [0.1, 0.2]])
+    with pytest.raises(optkin.MechanismError, match="method must be"):
+        optkin.assembly_modes(m, [0.6, 0.7, 0.65], method="bertini")
