@@ -97,3 +97,22 @@ def test_method_is_validated():
     m = optkin.mechanisms.rpr3([[0, 0], [1, 0], [0.3, 0.9]], [[0, 0], [0.25, 0], [0.1, 0.2]])
     with pytest.raises(optkin.MechanismError, match="method must be"):
         optkin.assembly_modes(m, [0.6, 0.7, 0.65], method="bertini")
+
+
+def test_start_systems_are_stored_and_verified(tmp_path, monkeypatch):
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+    m = optkin.mechanisms.rpr3([[0, 0], [1, 0], [0.3, 0.9]], [[0, 0], [0.25, 0], [0.1, 0.2]])
+    model = get_model(m)
+    S = H.load_or_build_start(model, seed=9)
+    path = H._start_path(model, 9)
+    assert path.exists() and S.root_count == 6
+    again = H.load_or_build_start(model, seed=9)  # loaded: the same numbers
+    np.testing.assert_array_equal(again.solutions, S.solutions)
+    np.testing.assert_array_equal(again.theta, S.theta)
+    # a stored "start system" whose solutions do not solve it is not trusted
+    np.savez(path, theta=S.theta, solutions=S.solutions + 0.1, loops=1, time=0.0)
+    rebuilt = H.load_or_build_start(model, seed=9)
+    assert rebuilt.root_count == 6 and H._verified(model, rebuilt.theta, rebuilt.solutions)
+    assert not H._verified(model, S.theta, S.solutions + 0.1)
+    path.write_bytes(b"not an npz file")
+    assert H.load_or_build_start(model, seed=9).root_count == 6

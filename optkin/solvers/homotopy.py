@@ -28,7 +28,9 @@ of any square model:
 The account: every path ends finite, at infinity, singular or failed; ``complete`` only when
 none failed and no two finite nonsingular endpoints coincide (path jumping). Not yet here:
 compiled tracking, endgames (a singular endpoint is only reported), the trace test, start
-systems stored on disk; see the issue tracker.
+systems of the library shipped with the package; see the issue tracker. Start systems are
+stored in the compiled-code cache directory (``.npz``, no pickles) and re-verified on
+loading (each stored solution must solve its system, nonsingular and distinct).
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..results import EnumerationStats, KinResult, SolutionSet, SolverStats
 
-__all__ = ["StartSystem", "start_system", "homotopy_modes"]
+__all__ = ["StartSystem", "start_system", "load_or_build_start", "homotopy_modes"]
 
 
 # ---------------------------------------------------------------------------------------
@@ -103,9 +105,10 @@ class _System:
         out = fm(X.real.T, X.imag.T, TH.real.T, TH.imag.T, DTH.real.T, DTH.imag.T)
         Hr, Hi, Jr, Ji, Tr, Ti = (np.asarray(v, dtype=float) for v in out)
         n = self.n
-        H = (Hr + 1j * Hi).T
-        J = (Jr + 1j * Ji).reshape(n, N, n).transpose(1, 0, 2)
-        Ht = (Tr + 1j * Ti).T
+        with np.errstate(invalid="ignore", over="ignore"):  # a path gone to inf: inf/nan
+            H = (Hr + 1j * Hi).T
+            J = (Jr + 1j * Ji).reshape(n, N, n).transpose(1, 0, 2)
+            Ht = (Tr + 1j * Ti).T
         return H, J, Ht
 
 
@@ -316,6 +319,74 @@ def start_system(model, seed: int = 0, stale: int = 3, max_loops: int = 40) -> S
 
 
 # ---------------------------------------------------------------------------------------
+# start systems on disk
+# ---------------------------------------------------------------------------------------
+
+#: Part of a stored start system's name: bump when the system's form changes.
+START_VERSION = "1"
+
+
+def _start_path(model, seed: int):
+    import hashlib
+
+    from ..model import compiled as cc
+
+    d = cc.cache_dir()
+    if d is None:
+        return None
+    key = f"{model.topology.key}|{START_VERSION}|{int(seed)}|{ca.__version__}"
+    return d / f"optkin_start_{hashlib.sha256(key.encode()).hexdigest()[:24]}.npz"
+
+
+def _verified(model, theta: np.ndarray, sols: np.ndarray) -> bool:
+    """The stored solutions solve their system, nonsingular and distinct (a damaged or
+    foreign file is recomputed, never trusted)."""
+    sys = _system(model)
+    if theta.shape != (sys.nth,) or sols.ndim != 2 or sols.shape[1] != sys.n or not len(sols):
+        return False
+    n = sols.shape[0]
+    Hv, J, _ = sys.eval(sols, np.repeat(theta[None], n, 0), np.zeros((n, sys.nth), complex))
+    if not np.all(np.isfinite(Hv)) or np.max(np.abs(Hv)) > 1e-8 * max(1.0, np.abs(theta).max()):
+        return False
+    with np.errstate(all="ignore"):
+        if np.any(np.abs(np.linalg.det(J)) < 1e-12):
+            return False
+    return _distinct(model, np.zeros((0, sys.n)), _canonical(model, sols)).shape[0] == n
+
+
+def load_or_build_start(model, seed: int = 0) -> StartSystem:
+    """The topology's start system for ``seed``: from the disk cache (beside the compiled
+    code) when a stored one verifies, else built by :func:`start_system` and stored."""
+    from ..model.compiled import _read_private
+
+    path = _start_path(model, seed)
+    if path is not None and path.exists():
+        try:
+            import io
+
+            with np.load(io.BytesIO(_read_private(path, 1 << 26)), allow_pickle=False) as z:
+                theta, sols = z["theta"], z["solutions"]
+                loops, took = int(z["loops"]), float(z["time"])
+            if _verified(model, theta, sols):
+                return StartSystem(theta, sols, loops, took)
+        except (OSError, ValueError, KeyError):
+            pass
+    S = start_system(model, seed)
+    if path is not None:
+        import os
+        import tempfile
+
+        try:
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".start-", suffix=".npz")
+            with os.fdopen(fd, "wb") as f:
+                np.savez(f, theta=S.theta, solutions=S.solutions, loops=S.loops, time=S.time)
+            os.replace(tmp, path)
+        except OSError:
+            pass
+    return S
+
+
+# ---------------------------------------------------------------------------------------
 # assembly modes by parameter homotopy
 # ---------------------------------------------------------------------------------------
 
@@ -334,7 +405,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     sys = _system(model)
     if start is None:
         start = model.topology.cached(("homotopy:start", int(seed)),
-                                      lambda: start_system(model, seed))
+                                      lambda: load_or_build_start(model, seed))
     t_start = time.perf_counter()
     target = np.concatenate([qa, np.asarray(model.p, dtype=float)[sys.p_used],
                              np.zeros(sys.n)]).astype(complex)
