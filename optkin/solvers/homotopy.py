@@ -95,6 +95,19 @@ class _System:
             self.f = lib[self.f.name()]
         self._maps: dict[int, ca.Function] = {}
         self.scale = np.asarray(model.x_scale, dtype=float)
+        # the angles the system is 2 pi periodic in (a Khalil table's loop-angle row, a
+        # sum of angles, is not): only those are identified modulo 2 pi
+        rng = np.random.default_rng(0)
+        x = rng.normal(size=self.n) + 1j * rng.normal(size=self.n)
+        th = rng.normal(size=self.nth) + 1j * rng.normal(size=self.nth)
+        zero = np.zeros((1, self.nth), complex)
+        h0 = self.eval(x[None], th[None], zero)[0][0]
+        self.periodic = np.zeros(self.n, bool)
+        for i in np.flatnonzero(np.asarray(model.x_angle, dtype=bool)):
+            y = x.copy()
+            y[i] += 2 * np.pi
+            h1 = self.eval(y[None], th[None], zero)[0][0]
+            self.periodic[i] = bool(np.max(np.abs(h1 - h0)) <= 1e-9 * (1 + np.max(np.abs(h0))))
 
     def eval(self, X: np.ndarray, TH: np.ndarray, DTH: np.ndarray):
         """H (N, n), Jx (N, n, n), Ht (N, n) at the N rows of X, TH, DTH (complex)."""
@@ -234,7 +247,7 @@ def _canonical(model, X: np.ndarray) -> np.ndarray:
 
     lay = _enum.layout(model)
     X = X.copy()
-    ang = np.flatnonzero(getattr(lay, "angle", np.zeros(model.nx, bool)))
+    ang = np.flatnonzero(_system(model).periodic)
     if ang.size:
         X[:, ang] = (np.mod(X[:, ang].real + np.pi, 2 * np.pi) - np.pi) + 1j * X[:, ang].imag
     q = np.asarray(getattr(lay, "quat", np.zeros(0, int)), dtype=int)
