@@ -111,17 +111,26 @@ class _System:
 
     def eval(self, X: np.ndarray, TH: np.ndarray, DTH: np.ndarray):
         """H (N, n), Jx (N, n, n), Ht (N, n) at the N rows of X, TH, DTH (complex)."""
-        N = X.shape[0]
+        from ..model.compiled import FastFn
+
+        N0 = X.shape[0]
+        N = max(8, 1 << (N0 - 1).bit_length())  # a few widths: padded with the first row
+        if N != N0:
+            pad = N - N0
+            X = np.concatenate([X, np.repeat(X[:1], pad, 0)])
+            TH = np.concatenate([TH, np.repeat(TH[:1], pad, 0)])
+            DTH = np.concatenate([DTH, np.repeat(DTH[:1], pad, 0)])
         fm = self._maps.get(N)
-        if fm is None:
-            fm = self._maps[N] = self.f.map(N)
-        out = fm(X.real.T, X.imag.T, TH.real.T, TH.imag.T, DTH.real.T, DTH.imag.T)
-        Hr, Hi, Jr, Ji, Tr, Ti = (np.asarray(v, dtype=float) for v in out)
+        if fm is None:  # through preallocated buffers: no numpy -> DM conversions
+            fm = self._maps[N] = FastFn(self.f.map(N))
+        # an (N, k) C-ordered array is the column-major (k, N) input
+        Hr, Hi, Jr, Ji, Tr, Ti = fm(X.real.ravel(), X.imag.ravel(), TH.real.ravel(),
+                                    TH.imag.ravel(), DTH.real.ravel(), DTH.imag.ravel())
         n = self.n
         with np.errstate(invalid="ignore", over="ignore"):  # a path gone to inf: inf/nan
-            H = (Hr + 1j * Hi).T
-            J = (Jr + 1j * Ji).reshape(n, N, n).transpose(1, 0, 2)
-            Ht = (Tr + 1j * Ti).T
+            H = (Hr + 1j * Hi).reshape(N, n)[:N0]
+            J = (Jr + 1j * Ji).reshape(N, n, n).transpose(0, 2, 1)[:N0]
+            Ht = (Tr + 1j * Ti).reshape(N, n)[:N0]
         return H, J, Ht
 
 
@@ -196,11 +205,12 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
         # Newton corrector: three iterations, contracting
         TH, DTH = theta(tn)
         ok = np.all(np.isfinite(Xp), axis=1)
+        Xp = np.where(ok[:, None], Xp, Xa)  # a failed row is evaluated at its last point
         prev = np.full(act.size, np.inf)
         # updates relative to the size of the point (complex solutions may be far out)
-        size = 1.0 + np.max(np.abs(np.where(ok[:, None], Xp, 0)) / sc, axis=1)
+        size = 1.0 + np.max(np.abs(Xp) / sc, axis=1)
         for _ in range(3):
-            H, J, _ = sys.eval(np.where(ok[:, None], Xp, 0), TH, DTH)
+            H, J, _ = sys.eval(Xp, TH, DTH)
             dx = _solve(J, H)
             nrm = np.max(np.abs(dx) / sc, axis=1) / size
             ok &= np.isfinite(nrm) & (nrm <= np.maximum(0.5 * prev, 1e-9))
