@@ -1,0 +1,62 @@
+"""assembly_modes(method="homotopy") beside in-run baselines: the multistart default and,
+for the 3-RPR, the univariate polynomial of the elimination (numpy.roots, the floor).
+
+Start systems are built (or loaded from the cache) before timing; the time of building
+one is ``extra_info["start_system_s"]`` (measured in a fresh cache directory).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from conftest import median_time, record
+from test_assembly_modes import (
+    DIET_A,
+    DIET_B,
+    DIET_L,
+    SIX_A,
+    SIX_B,
+    SIX_S,
+    polynomial_floor,
+)
+
+import optkin
+from optkin.model import get_model
+from optkin.solvers import homotopy as H
+
+
+def _start_time(mech) -> float:
+    t0 = time.perf_counter()
+    H.start_system(get_model(mech), seed=123)  # not cached: a fresh build
+    return time.perf_counter() - t0
+
+
+def test_homotopy_rpr3_six(benchmark):
+    m = optkin.mechanisms.rpr3(SIX_A, SIX_B)
+    optkin.assembly_modes(m, SIX_S, method="homotopy")
+    res = benchmark(lambda: optkin.assembly_modes(m, SIX_S, method="homotopy"))
+    t_poly = median_time(lambda: polynomial_floor(SIX_A, SIX_B, SIX_S), min_time=0.2)
+    t_multi = median_time(lambda: optkin.assembly_modes(m, SIX_S), min_time=0.5)
+    record(benchmark, t_poly, "univariate polynomial (numpy.roots), the floor",
+           mechanism="rpr3-six", count=len(res), complete=res.complete,
+           paths=res.stats.paths, multistart_s=t_multi, start_system_s=_start_time(m))
+    assert len(res) == 6 and res.complete
+
+
+def test_homotopy_stewart_dietmaier(benchmark):
+    m = optkin.mechanisms.stewart_gough(DIET_A, DIET_B)
+    optkin.assembly_modes(m, DIET_L, method="homotopy")
+    res = benchmark.pedantic(lambda: optkin.assembly_modes(m, DIET_L, method="homotopy"),
+                             rounds=5, iterations=1)
+    t_multi = median_time(lambda: optkin.assembly_modes(m, DIET_L), min_time=1.0)
+    rng = np.random.default_rng(0)  # a generic instance: legs from a random pose
+    perturbed = DIET_L * (1 + 0.02 * rng.uniform(-1, 1, 6))
+    t_multi_generic = median_time(lambda: optkin.assembly_modes(m, perturbed), min_time=1.0)
+    t_hom_generic = median_time(lambda: optkin.assembly_modes(m, perturbed, method="homotopy"),
+                                min_time=1.0)
+    record(benchmark, t_multi, "multistart (the default), Dietmaier's legs",
+           mechanism="stewart-dietmaier", count=len(res), complete=res.complete,
+           paths=res.stats.paths, generic_multistart_s=t_multi_generic,
+           generic_homotopy_s=t_hom_generic, start_system_s=_start_time(m))
+    assert len(res) == 40 and res.complete
