@@ -167,7 +167,7 @@ def _solve(J: np.ndarray, b: np.ndarray) -> np.ndarray:
 def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
           gamma: complex, tol: float = 1e-10, h0: float = 0.02, hmax: float = 0.1,
           hmin: float = 1e-12, big: float = 1e8, max_steps: int = 5000,
-          accept_tol: float = 1e-6) -> _Paths:
+          accept_tol: float = 1e-6, grow: float = 1.25) -> _Paths:
     """Track the solutions X0 (N, n) of H(.; th0) to H(.; th1) along the gamma path."""
     N, n = X0.shape
     sc = sys.scale
@@ -209,10 +209,13 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
         prev = np.full(act.size, np.inf)
         # updates relative to the size of the point (complex solutions may be far out)
         size = 1.0 + np.max(np.abs(Xp) / sc, axis=1)
+        first_nrm = None
         for _ in range(3):
             H, J, _ = sys.eval(Xp, TH, DTH)
             dx = _solve(J, H)
             nrm = np.max(np.abs(dx) / sc, axis=1) / size
+            if first_nrm is None:
+                first_nrm = np.where(np.isfinite(nrm), nrm, np.inf)
             ok &= np.isfinite(nrm) & (nrm <= np.maximum(0.5 * prev, 1e-9))
             Xp = Xp - np.where(ok[:, None], dx, 0)
             prev = np.where(np.isfinite(nrm), nrm, np.inf)
@@ -220,7 +223,10 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
         accept = ok & (prev <= accept_tol) & (small <= 0.5 + 0.5 * np.abs(Xa).max(axis=1))
         idx = act[accept]
         X[idx], t[idx] = Xp[accept], tn[accept]
-        h[idx] = np.minimum(h[idx] * 2.0, hmax)
+        # grow gently: by 2 only when the predictor was very good (the first Newton update
+        # tiny), else by `grow` (doubling after every success rejected every other step)
+        first = first_nrm[accept]
+        h[idx] = np.minimum(h[idx] * np.where(first < 1e-7, 2.0, grow), hmax)
         rej = act[~accept]
         h[rej] *= 0.5
         # only near the target can a path go to infinity (before it, the parameters are
