@@ -116,3 +116,4 @@ def test_start_systems_are_stored_and_verified(tmp_path, monkeypatch):
     assert not H._verified(model, S.theta, S.solutions + 0.1)
     path.write_bytes(b"not an npz file")
     assert H.load_or_build_start(model, seed=9).root_count == 6
+

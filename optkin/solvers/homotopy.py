@@ -13,8 +13,9 @@ of any square model:
   for a random complex x_0, which is then a solution by construction), the solutions are
   grown by loops theta_0 -> theta_1 -> theta_2 -> theta_0 through random complex
   parameters: each loop permutes the solutions, and new endpoints are new solutions. The
-  loops stop after ``stale`` loops in a row that found nothing (a heuristic: the trace test
-  is not implemented yet), or at ``max_loops``. Solutions are identified modulo 2 pi in
+  loops stop at the structure's known count when it has one (distance legs: 6, 40, 2),
+  else after ``stale`` loops in a row that found nothing (a heuristic: the trace test is
+  not implemented yet), or at ``max_loops``. Solutions are identified modulo 2 pi in
   the real part of each angle and up to the sign of a quaternion.
 * the parameter homotopy. From theta_0 to the target (q_a, p, 0) along
   theta_0 + s(t) (theta_1 - theta_0), s(t) = gamma t / (1 + (gamma - 1) t) with a random
@@ -316,8 +317,16 @@ def _random_theta(sys: _System, model, rng, c: np.ndarray | None = None) -> np.n
     return np.concatenate([qa, pp, c])
 
 
-def start_system(model, seed: int = 0, stale: int = 3, max_loops: int = 40) -> StartSystem:
-    """Monodromy: one solution by construction, grown by random loops (module docstring)."""
+def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60) -> StartSystem:
+    """Monodromy: one solution by construction, grown by random loops (module docstring).
+
+    Stops after ``stale`` loops in a row without a new solution, or at ``max_loops``;
+    where the structure has a known bound on the number of solutions (distance legs:
+    6, 40 or 2), reaching it stops at once and falling short of it never counts as
+    stale."""
+    from ..model import enumeration as _enum
+
+    bound = _enum.known_bound(model)
     t0 = time.perf_counter()
     sys = _system(model)
     rng = np.random.default_rng([int(seed), 7])
@@ -328,7 +337,8 @@ def start_system(model, seed: int = 0, stale: int = 3, max_loops: int = 40) -> S
     th[-sys.n:] = H[0]  # with c = 0, H(x0) = F(x0): c0 = F(x0) makes x0 a solution
     S = _canonical(model, x0[None, :])
     quiet = loops = 0
-    while quiet < stale and loops < max_loops:
+    while loops < max_loops and (bound is None or len(S) < bound) and (
+            quiet < stale or (bound is not None and len(S) < bound)):
         loops += 1
         th1, th2 = _random_theta(sys, model, rng), _random_theta(sys, model, rng)
         Y = S
@@ -352,7 +362,7 @@ def start_system(model, seed: int = 0, stale: int = 3, max_loops: int = 40) -> S
 # ---------------------------------------------------------------------------------------
 
 #: Part of a stored start system's name: bump when the system's form changes.
-START_VERSION = "1"
+START_VERSION = "3"
 
 
 def _start_path(model, seed: int):
@@ -475,13 +485,19 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     out.sort(key=lambda r: tuple(np.round(r.x / sc, 9)))
     n_fail = int(np.sum(P.status == "failed"))
     n_inf = int(np.sum(P.status == "at_infinity"))
-    complete = n_fail == 0 and jumped == 0
+    from ..model import enumeration as _enum
+
+    bound = _enum.known_bound(model)
+    short = bound is not None and start.root_count < bound  # monodromy missed some
+    complete = n_fail == 0 and jumped == 0 and not short
     account = EnumerationStats("homotopy", start.root_count, int(fin.size), n_inf,
                                int(singular.sum()), n_fail, start.root_count, complete)
     msg = (f"{len(out)} real assembly modes from {start.root_count} paths: {fin.size} "
            f"finite ({int(singular.sum())} singular), {n_inf} at infinity, {n_fail} failed"
            + (f", {jumped} path jumps" if jumped else "")
-           + ("; every path accounted for" if complete else "; not every path accounted for"))
+           + ("; every path accounted for" if complete else "; not every path accounted for")
+           + (f"; the start system has {start.root_count} of the {bound} solutions the "
+              "structure has: some modes may be missing" if short else ""))
     info = {"success": bool(out), "status": "optimal" if out else "infeasible",
             "message": msg, "complete": complete, "root_count": start.root_count,
             "monodromy_loops": start.loops, "start_time": start.time, "gamma_tries": tries,
