@@ -125,3 +125,19 @@ def test_the_account_is_typed_and_adds_up():
     circle = optkin.assembly_modes(optkin.mechanisms.rpr3(TRI, TRI), [0.5, 0.5, 0.5])
     n_samples = sum(len(c.samples) for c in circle.components)
     assert circle.stats.singular >= n_samples > 0 and circle.complete is False
+
+
+def test_inverse_gives_the_same_account():
+    # closed form (every branch of every leg): complete; a numerical search: every start
+    # accounted for, completeness not claimed
+    m = optkin.mechanisms.rpr3([[0, 0], [1, 0], [0.5, 0.9]], [[-0.2, -0.1], [0.25, -0.2],
+                                                              [0.05, 0.25]])
+    p = optkin.inverse(m, [0.45, 0.35, 0.1])
+    assert p.stats.method == "closed-form" and p.complete and p.stats.finite >= len(p)
+    sr = optkin.mechanisms.sr400()
+    q = optkin.forward(sr, [0.3, -0.4, 0.2, 0.5, 0.4, 0.6], guess=[np.pi / 2 + 1, -1, np.pi + 1])
+    inv = optkin.inverse(sr, q.pose)
+    st = inv.stats
+    assert st.method == "multistart" and not inv.complete
+    assert st.paths == inv.info["starts"] == st.finite + st.failed
+    assert f"of {st.paths} starts converged" in inv.summary()

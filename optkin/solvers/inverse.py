@@ -23,7 +23,7 @@ from ..mechanism.geometry import wrap_angle
 from ..mechanism.tasks import as_pose
 from ..model import Model, get_model
 from ..model.inverse import ClosedPart, SearchPart
-from ..results import KinResult, SolutionSet, SolverStats
+from ..results import EnumerationStats, KinResult, SolutionSet, SolverStats
 from .common import count_option, make_result, merge_options, newton, timer
 from .enumerate import _sobol
 
@@ -135,8 +135,10 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
     act = np.array(mech.actuated)
     out: list[KinResult] = []
     outside = 0
+    combos = 0
     checks = [p_ for p_ in parts if isinstance(p_, SearchPart) and p_.check is not None]
     for combo in itertools.product(*[range(len(s_)) for s_ in per_part]):
+        combos += 1
         q = np.zeros(nq)
         for i, c in enumerate(combo):
             patch = per_part[i][c]
@@ -183,7 +185,15 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
     if deadline.expired():  # the enumeration was cut short: say so, never claim success
         info.update(success=False, status="time_limit",
                     message=deadline.message("inverse") + f"; {info['message']}")
-    return SolutionSet(out, "postures", info, seed=seed if searched else None)
+    n_sing = sum(1 for r_ in out if not r_.cond <= 1e8)
+    if searched:  # a numerical search: every start accounted for, completeness unproven
+        account = EnumerationStats("multistart", runs, converged, 0, n_sing,
+                                   max(0, runs - converged), None, False)
+    else:  # every branch of every leg's closed form: complete
+        account = EnumerationStats("closed-form", combos, len(out) + outside, 0, n_sing,
+                                   0, combos, not deadline.expired())
+    info["complete"] = account.complete
+    return SolutionSet(out, "postures", info, seed=seed if searched else None, stats=account)
 
 
 def _method(parts: list) -> str:
