@@ -12,8 +12,10 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 import pytest
+from test_certify import _mechanisms
 
 import optkin
+from optkin.model import compiled as cc
 from optkin.model import get_model
 from optkin.model.complexify import complexify
 
@@ -63,17 +65,9 @@ def test_non_holomorphic_operations_are_refused():
 
 
 def _mechs():
-    ab = np.deg2rad([-10, 10, 110, 130, 230, 250])
-    ap = np.deg2rad([-50, 50, 70, 170, 190, 290])
-    return {
-        "rpr3": optkin.mechanisms.rpr3([[0, 0], [1, 0], [0.3, 0.9]],
-                                       [[0, 0], [0.25, 0], [0.1, 0.2]]),
-        "stewart": optkin.mechanisms.stewart_gough(
-            np.c_[np.cos(ab), np.sin(ab), np.zeros(6)],
-            0.5 * np.c_[np.cos(ap), np.sin(ap), np.zeros(6)]),
-        "five_bar": optkin.mechanisms.five_bar(8.0, 7.0, 5.0, 5.0, 7.0),
-        "sr400": optkin.mechanisms.sr400(),
-    }
+    """test_certify's mechanisms (distance legs, a Khalil four-bar, a Delta) and the SR400
+    (a Khalil table with two loops)."""
+    return {**_mechanisms(), "sr400": optkin.mechanisms.sr400()}
 
 
 @pytest.mark.parametrize("name", list(_mechs()))
@@ -108,12 +102,10 @@ def test_model_closure_complex_step_and_holomorphy(name):
         np.testing.assert_allclose(along_imag, 1j * along_real, rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.skipif(cc.find_compiler() is None,
+                    reason="no C compiler here: the compiled path falls back to the interpreter")
 def test_complexified_closure_compiles_and_maps(tmp_path, monkeypatch):
-    from optkin.model import compiled as cc
-
     monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
-    if cc.find_compiler() is None:
-        pytest.skip("no C compiler")
     model = get_model(_mechs()["rpr3"])
     fc = complexify(model.topology.phi, ["x"])
     lib = cc.library("complex:rpr3", [fc])

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_assembly_modes import DIET_A, DIET_B, DIET_L  # Dietmaier's platform
 
 import optkin
 from optkin.model import get_model
@@ -61,14 +62,8 @@ def test_gosselin_angeles_platform_sphere():
 
 
 def test_generic_platform_has_dimension_zero():
-    a = np.array([[0, 0, 0], [1.107915, 0, 0], [0.549094, 0.756063, 0],
-                  [0.735077, -0.223935, 0.525991], [0.514188, -0.526063, -0.368418],
-                  [0.590473, 0.094733, -0.205018]])
-    b = np.array([[0, 0, 0], [0.542805, 0, 0], [0.956919, -0.528915, 0],
-                  [0.665885, -0.353482, 1.402538], [0.478359, 1.158742, 0.107672],
-                  [-0.137087, -0.235121, 0.353913]])
-    m = optkin.mechanisms.stewart_gough(a, b)
-    modes = optkin.assembly_modes(m, [1, 0.645275, 1.086284, 1.503439, 1.281933, 0.771071])
+    m = optkin.mechanisms.stewart_gough(DIET_A, DIET_B)
+    modes = optkin.assembly_modes(m, DIET_L)
     assert len(modes) == 40 and modes.dimension == 0 and modes.components == []
     assert modes.info["complete"] is True
 

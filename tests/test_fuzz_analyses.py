@@ -310,8 +310,15 @@ def map_case(draw):
 
 def _map(case):
     args, opts = case
-    check(lambda: optkin.plot_singularity_map(args["mech"], args["u"], args["v"], args["path"],
-                                              **opts))
+    # a junk path (a short text) is a file name relative to the working directory: write
+    # it in the fuzz's own directory, never in the checkout (it left x.png there)
+    here = os.getcwd()
+    os.chdir(PNG_DIR)
+    try:
+        check(lambda: optkin.plot_singularity_map(args["mech"], args["u"], args["v"],
+                                                  args["path"], **opts))
+    finally:
+        os.chdir(here)
 
 
 CASES = {"assembly_modes": (assembly_case(), _assembly), "track": (track_case(), _track),

@@ -11,19 +11,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_assembly_modes import _matches, five_bar_reference, rpr_reference
+from test_assembly_modes import (
+    DIET_A,
+    DIET_B,
+    DIET_L,
+    _matches,
+    five_bar_reference,
+    rpr_reference,
+)
 
 import optkin
 from optkin.model import get_model
 from optkin.solvers import homotopy as H
-
-DIET_A = np.array([[0, 0, 0], [1.107915, 0, 0], [0.549094, 0.756063, 0],
-                   [0.735077, -0.223935, 0.525991], [0.514188, -0.526063, -0.368418],
-                   [0.590473, 0.094733, -0.205018]])
-DIET_B = np.array([[0, 0, 0], [0.542805, 0, 0], [0.956919, -0.528915, 0],
-                   [0.665885, -0.353482, 1.402538], [0.478359, 1.158742, 0.107672],
-                   [-0.137087, -0.235121, 0.353913]])
-DIET_L = np.array([1, 0.645275, 1.086284, 1.503439, 1.281933, 0.771071])
 
 
 def _rot2(phi):

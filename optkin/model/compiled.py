@@ -58,6 +58,7 @@ import threading
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -369,6 +370,23 @@ def _load(path: Path, tag: str, key: str,
         return None
 
 
+def _library_path(d: Path, tag: str, key: str) -> Path:
+    return d / f"optkin_{tag.split(':')[0]}_{key[:20]}{_EXT}"
+
+
+def _start_compiler(cc: str, tmp: str, path: Path, funcs: Sequence[ca.Function],
+                    **popen: Any) -> tuple[Path, subprocess.Popen]:
+    """Generate the C code of ``funcs`` into ``tmp`` (in this thread) and start the
+    compiler on it; returns the library it will write and the compiler's process."""
+    src = Path(tmp) / (path.stem + ".c")
+    cg = ca.CodeGenerator(src.name, {"with_header": False})
+    for f in funcs:
+        cg.add(f)
+    cg.generate(tmp + os.sep)
+    so = Path(tmp) / path.name
+    return so, subprocess.Popen([cc, *_FLAGS, str(src), "-o", str(so), "-lm"], **popen)
+
+
 def library(
     tag: str, funcs: Sequence[ca.Function], build: bool = True
 ) -> dict[str, ca.Function] | None:
@@ -410,7 +428,7 @@ def libraries(
     todo = []
     for k, (tag, funcs) in enumerate(requests):
         key = _digest(tag, funcs)
-        path = d / f"optkin_{tag.split(':')[0]}_{key[:20]}{_EXT}"
+        path = _library_path(d, tag, key)
         out[k] = _load(path, tag, key, funcs)
         if out[k] is None:
             todo.append((k, tag, key, path, funcs))
@@ -427,14 +445,8 @@ def libraries(
             if out[k] is not None:
                 continue
             try:
-                src = Path(tmp) / (path.stem + ".c")
-                cg = ca.CodeGenerator(src.name, {"with_header": False})
-                for f in funcs:
-                    cg.add(f)
-                cg.generate(tmp + os.sep)
-                so = Path(tmp) / path.name
-                p = subprocess.Popen([cc, *_FLAGS, str(src), "-o", str(so), "-lm"],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                so, p = _start_compiler(cc, tmp, path, funcs, stdout=subprocess.PIPE,
+                                        stderr=subprocess.PIPE, text=True)
                 procs.append((k, tag, key, path, funcs, so, p))
             except (OSError, RuntimeError) as exc:
                 log.debug("optkin: generating %s failed (%s)", path.stem, exc)
@@ -528,7 +540,7 @@ def start_library(tag: str, funcs: Sequence[ca.Function]
     if d is None:
         return None
     key = _digest(tag, funcs)
-    path = d / f"optkin_{tag.split(':')[0]}_{key[:20]}{_EXT}"
+    path = _library_path(d, tag, key)
     lib = _load(path, tag, key, funcs)
     if lib is not None:
         return lib
@@ -537,15 +549,9 @@ def start_library(tag: str, funcs: Sequence[ca.Function]
         return None
     tmp = tempfile.mkdtemp(dir=d, prefix=".build-")
     try:
-        src = Path(tmp) / (path.stem + ".c")
-        cg = ca.CodeGenerator(src.name, {"with_header": False})
-        for f in funcs:
-            cg.add(f)
-        cg.generate(tmp + os.sep)
-        so = Path(tmp) / path.name
         with open(Path(tmp) / "compiler.log", "wb") as log_file:  # no pipe to fill up
-            proc = subprocess.Popen([cc, *_FLAGS, str(src), "-o", str(so), "-lm"],
-                                    stdout=subprocess.DEVNULL, stderr=log_file)
+            so, proc = _start_compiler(cc, tmp, path, funcs, stdout=subprocess.DEVNULL,
+                                       stderr=log_file)
     except (OSError, RuntimeError) as exc:
         log.debug("optkin: generating %s failed (%s)", path.stem, exc)
         shutil.rmtree(tmp, ignore_errors=True)

@@ -136,9 +136,7 @@ def _pow(a, b):
         c = float(br)
         if c.is_integer() and abs(c) <= 64:
             return _ipow(a, int(c))
-    if a[1] is None and bi is None:  # real ** real: real where a >= 0 (principal branch)
-        return _exp(_mul(b, _log(a)))
-    return _exp(_mul(b, _log(a)))
+    return _exp(_mul(b, _log(a)))  # principal branch
 
 
 def _unsupported(op):

@@ -454,11 +454,12 @@ def seed_legs(model, X: np.ndarray, qa: np.ndarray, rng: np.random.Generator,
 
 
 def solve_rows(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solutions of the systems A[k] x = b[k]; NaN rows where A[k] is singular."""
+    """Solutions of the systems A[k] x = b[k] (real or complex); NaN rows where A[k] is
+    singular."""
     try:
         return np.linalg.solve(A, b[..., None])[..., 0]
     except np.linalg.LinAlgError:
-        out = np.full(b.shape, np.nan)
+        out = np.full(b.shape, np.nan, dtype=np.result_type(A, b, float))
         for k in range(A.shape[0]):
             try:
                 out[k] = np.linalg.solve(A[k], b[k])

@@ -44,6 +44,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import MechanismError
+from ..model import enumeration as _enum
 from ..results import EnumerationStats, KinResult, SolutionSet, SolverStats
 
 __all__ = ["StartSystem", "start_system", "load_or_build_start", "homotopy_modes"]
@@ -152,19 +153,6 @@ class _Paths:
     steps: int  # loop iterations (steps of the slowest path)
 
 
-def _solve(J: np.ndarray, b: np.ndarray) -> np.ndarray:
-    try:
-        return np.linalg.solve(J, b[..., None])[..., 0]
-    except np.linalg.LinAlgError:
-        out = np.full_like(b, np.nan)
-        for k in range(J.shape[0]):
-            try:
-                out[k] = np.linalg.solve(J[k], b[k])
-            except np.linalg.LinAlgError:
-                pass
-        return out
-
-
 def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
           gamma: complex, tol: float = 1e-10, h0: float = 0.02, hmax: float = 0.1,
           hmin: float = 1e-12, big: float = 1e8, max_steps: int = 5000,
@@ -182,7 +170,7 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
     def rhs(X, t):
         TH, DTH = theta(t)
         _, J, Ht = sys.eval(X, TH, DTH)
-        return -_solve(J, Ht)
+        return -_enum.solve_rows(J, Ht)
 
     X = X0.astype(complex).copy()
     t = np.zeros(N)
@@ -213,7 +201,7 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
         first_nrm = None
         for _ in range(3):
             H, J, _ = sys.eval(Xp, TH, DTH)
-            dx = _solve(J, H)
+            dx = _enum.solve_rows(J, H)
             nrm = np.max(np.abs(dx) / sc, axis=1) / size
             if first_nrm is None:
                 first_nrm = np.where(np.isfinite(nrm), nrm, np.inf)
@@ -245,7 +233,7 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
         Xf = X[fin]
         for _ in range(3):  # polish at the target
             H, J, _ = sys.eval(Xf, TH, np.zeros_like(TH))
-            dx = _solve(J, H)
+            dx = _enum.solve_rows(J, H)
             good = np.all(np.isfinite(dx), axis=1)
             Xf = Xf - np.where(good[:, None], dx, 0)
         _, J, _ = sys.eval(Xf, TH, np.zeros_like(TH))
@@ -260,14 +248,11 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
 # ---------------------------------------------------------------------------------------
 
 def _canonical(model, X: np.ndarray) -> np.ndarray:
-    from ..model import enumeration as _enum
-
-    lay = _enum.layout(model)
     X = X.copy()
     ang = np.flatnonzero(_system(model).periodic)
     if ang.size:
         X[:, ang] = (np.mod(X[:, ang].real + np.pi, 2 * np.pi) - np.pi) + 1j * X[:, ang].imag
-    q = np.asarray(getattr(lay, "quat", np.zeros(0, int)), dtype=int)
+    q = np.asarray(_enum.layout(model).quat, dtype=int)
     if q.size == 4:
         Q = X[:, q]
         k = np.argmax(np.abs(Q), axis=1)
@@ -324,8 +309,6 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60) -> S
     where the structure has a known bound on the number of solutions (distance legs:
     6, 40 or 2), reaching it stops at once and falling short of it never counts as
     stale."""
-    from ..model import enumeration as _enum
-
     bound = _enum.known_bound(model)
     t0 = time.perf_counter()
     sys = _system(model)
@@ -485,8 +468,6 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     out.sort(key=lambda r: tuple(np.round(r.x / sc, 9)))
     n_fail = int(np.sum(P.status == "failed"))
     n_inf = int(np.sum(P.status == "at_infinity"))
-    from ..model import enumeration as _enum
-
     bound = _enum.known_bound(model)
     short = bound is not None and start.root_count < bound  # monodromy missed some
     complete = n_fail == 0 and jumped == 0 and not short
