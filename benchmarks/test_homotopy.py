@@ -60,3 +60,34 @@ def test_homotopy_stewart_dietmaier(benchmark):
            paths=res.stats.paths, generic_multistart_s=t_multi_generic,
            generic_homotopy_s=t_hom_generic, start_system_s=_start_time(m))
     assert len(res) == 40 and res.complete
+
+
+def test_homotopy_rpr3_random_200(benchmark):
+    """The issue's batch: 200 random 3-RPR (base in [-10, 10]^2, platform in [-4, 4]^2, legs
+    from a random pose). Per instance, the homotopy's time beside numpy.roots on the
+    sextic; the benchmark's own figure is the whole batch."""
+    rng = np.random.default_rng(2026)
+    inst = []
+    for _ in range(200):
+        a, b = rng.uniform(-10, 10, (3, 2)), rng.uniform(-4, 4, (3, 2))
+        phi = rng.uniform(-np.pi, np.pi)
+        R = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
+        p = rng.uniform(-3, 3, 2)
+        inst.append((optkin.mechanisms.rpr3(a, b), a, b,
+                     np.linalg.norm(p + b @ R.T - a, axis=1)))
+    optkin.assembly_modes(inst[0][0], inst[0][3], method="homotopy")  # start system, compile
+    hom, poly, complete = [], [], 0
+    for m, a, b, s in inst:
+        t0 = time.perf_counter()
+        res = optkin.assembly_modes(m, s, method="homotopy")
+        hom.append(time.perf_counter() - t0)
+        complete += res.complete
+        poly.append(median_time(lambda a=a, b=b, s=s: polynomial_floor(a, b, s), min_time=0.01))
+    benchmark.pedantic(lambda: [optkin.assembly_modes(m, s, method="homotopy")
+                                for m, _, _, s in inst], rounds=3, iterations=1)
+    record(benchmark, float(np.sum(poly)), "numpy.roots on the sextic, per instance, summed",
+           mechanism="rpr3-random-200", complete=complete,
+           homotopy_median_s=float(np.median(hom)), homotopy_max_s=float(np.max(hom)),
+           sextic_median_s=float(np.median(poly)),
+           median_ratio=float(np.median(hom) / np.median(poly)))
+    assert complete == 200

@@ -123,6 +123,10 @@ def _select_rows(st: Structure, p: np.ndarray, mech: Mechanism, samples: int = 4
         raise MechanismError("the closure rows are not finite at random configurations; "
                              "check the geometry", path=())
     scale = max(1.0, float(np.abs(G).max()))
+    if np.linalg.matrix_rank(G, tol=1e-9 * scale) == G.shape[0]:
+        # every row independent (the usual case): the loop below would keep them all,
+        # since a subset of rows of a full-rank G has no smaller singular value
+        return list(range(G.shape[0]))
     kept: list[int] = []
     basis = np.zeros((0, G.shape[1]))
     for i in range(G.shape[0]):

@@ -20,16 +20,25 @@ of any square model:
 * the parameter homotopy. From theta_0 to the target (q_a, p, 0) along
   theta_0 + s(t) (theta_1 - theta_0), s(t) = gamma t / (1 + (gamma - 1) t) with a random
   complex gamma (which keeps the path away from the discriminant with probability one),
-  every path is tracked by an RK4 predictor and a Newton corrector with adaptive steps;
+  every path is tracked by an RK4 predictor and a Newton corrector with adaptive steps
+  (linear solves equilibrated: columns by the size of the point, rows to unit norm);
   a path that grows beyond 1e8 (scaled) near the target (t >= 0.99) goes to infinity;
   one that does so earlier, or whose step falls below 1e-12, fails, and then every path is
-  tracked again along another gamma (up to three in all). Endpoints with negligible imaginary parts are polished by the real
-  model's Newton step and returned as :class:`~optkin.results.KinResult`.
+  tracked again along another gamma (up to :data:`TRIES` in all; on nearly planar 6-6
+  platforms a path can swing out to |x| ~ 1e6, where Newton stalls at 1e-7 relative:
+  projective coordinates would cure it, not done yet). Endpoints with negligible imaginary
+  parts are polished by the real model's Newton step and returned as
+  :class:`~optkin.results.KinResult`.
+
+The tracking is compiled: ``CHUNK`` predictor-corrector steps of a path are one CasADi
+Function (:class:`_Tracker`, built once per topology, mapped over the paths that are still
+running, their statuses read between calls); without a C compiler the same steps run as a
+numpy loop over the paths (:func:`track`).
 
 The account: every path ends finite, at infinity, singular or failed; ``complete`` only when
 none failed and no two finite nonsingular endpoints coincide (path jumping). Not yet here:
-compiled tracking, endgames (a singular endpoint is only reported), the trace test, start
-systems of the library shipped with the package; see the issue tracker. Start systems are
+endgames (a singular endpoint is only reported), the trace test, start systems of the
+library shipped with the package; see the issue tracker. Start systems are
 stored in the compiled-code cache directory (``.npz``, no pickles) and re-verified on
 loading (each stored solution must solve its system, nonsingular and distinct).
 """
@@ -88,7 +97,8 @@ class _System:
         Ht = ca.jtimes(H, th, dth)
         f = ca.Function("homotopy", [st.x, th, dth], [ca.densify(H), Jx, ca.densify(Ht)],
                         ["x", "th", "dth"], ["H", "Jx", "Ht"])
-        self.f = complexify(f)
+        self.f = self.f_sx = complexify(f)
+        self.key = topo.key
         from ..model import compiled as cc
 
         lib = cc.library(f"homotopy:{topo.key}", [self.f])  # None: no compiler, interpreted
@@ -140,6 +150,202 @@ def _system(model) -> _System:
     return model.topology.cached("homotopy:system", lambda: _System(model))
 
 
+def _solve_scaled(J: np.ndarray, b: np.ndarray, X: np.ndarray, sc: np.ndarray) -> np.ndarray:
+    """J[k]^-1 b[k], with the columns scaled by max(1, |x|/scale) and the rows to unit
+    norm: the same step, far better conditioned where a path swings far out (measured on
+    a nearly planar 6-6 platform at |x| ~ 5e4: cond 2e15 unscaled, 2e9 scaled). Systems
+    of at most :data:`SMALL` unknowns are solved unscaled (the scaling costs a 3-RPR
+    40 % of its time, and its paths have not needed it)."""
+    if X.shape[1] <= SMALL:
+        return _enum.solve_rows(J, b)
+    D = np.maximum(1.0, np.abs(X) / sc)
+    Jc = J * D[:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        r = 1.0 / np.sqrt(np.sum(np.abs(Jc) ** 2, axis=2))
+        return _enum.solve_rows(Jc * r[:, :, None], b * r) * D
+
+
+# ---------------------------------------------------------------------------------------
+# compiled tracking: K steps of the predictor-corrector in one compiled Function
+# ---------------------------------------------------------------------------------------
+
+#: Steps per call of the compiled tracker (the paths' statuses are read between calls).
+CHUNK = 8
+
+#: Where each path's state sits in the compiled tracker's state vector (after 2n values).
+_T, _H, _ST, _CNT = 0, 1, 2, 3
+_CODES = np.array(["running", "finite", "at_infinity", "failed"], dtype=object)
+
+
+def _cmul(a, b):
+    return a[0] * b[0] - a[1] * b[1], a[0] * b[1] + a[1] * b[0]
+
+
+def _cdiv(a, b):
+    den = b[0] * b[0] + b[1] * b[1]
+    return (a[0] * b[0] + a[1] * b[1]) / den, (a[1] * b[0] - a[0] * b[1]) / den
+
+
+def _finite(v):
+    return ca.sum1(ca.fabs(v)) < 1e300  # NaN and inf both fail
+
+
+class _Tracker:
+    """:func:`track`'s step, written once as a CasADi graph: ``CHUNK`` steps of every path
+    in one compiled call, mapped over the paths (the same arithmetic as :func:`track`, whose
+    Python loop remains for when no compiler is available)."""
+
+    def __init__(self, sys: _System, tol: float = 1e-10, h0: float = 0.05, hmax: float = 0.25,
+                 hmin: float = 1e-12, big: float = 1e8, accept_tol: float = 1e-6,
+                 grow: float = 1.25, sx: bool | None = None, newton: int = 3) -> None:
+        n, nth = sys.n, sys.nth
+        # small systems as one SX graph (the linear solves unrolled), larger ones as MX
+        # (QR factorisations by CasADi's linear solver, a call to the system each)
+        sx = n <= SMALL if sx is None else sx
+        sym = ca.SX if sx else ca.MX
+        self.n, self.nth, self.h0, self.hmax = n, nth, h0, hmax
+        # the value and Jacobian (the corrector), the Jacobian and the parameter derivative
+        # (the predictor): each without the work of the output it does not need
+        ins = sys.f_sx.sx_in()
+        out = sys.f_sx(*ins)
+        f_hj = ca.Function("homotopy_hj", ins[:4], out[:4])
+        f_jt = ca.Function("homotopy_jt", ins, out[2:])
+        sc = ca.DM(sys.scale)
+        s = sym.sym("state", 2 * n + 4)
+        par = sym.sym("par", 4 * nth + 2)
+        th0 = (par[0:nth], par[nth:2 * nth])
+        d = (par[2 * nth:3 * nth], par[3 * nth:4 * nth])
+        g = (par[4 * nth], par[4 * nth + 1])
+
+        def theta(t):
+            den = (1 + (g[0] - 1) * t, g[1] * t)
+            sr, si = _cdiv((g[0] * t, g[1] * t), den)
+            dsr, dsi = _cdiv(g, _cmul(den, den))
+            TH = (th0[0] + sr * d[0] - si * d[1], th0[1] + sr * d[1] + si * d[0])
+            DTH = (dsr * d[0] - dsi * d[1], dsr * d[1] + dsi * d[0])
+            return TH, DTH
+
+        def csolve(Jr, Ji, br, bi, x):  # equilibrated as in _solve_scaled
+            if n <= SMALL:
+                A = ca.blockcat([[Jr, -Ji], [Ji, Jr]])
+                u = ca.solve(A, ca.vertcat(br, bi))
+                return u[:n], u[n:]
+            D = ca.fmax(1, absc(x) / sc)
+            Jr, Ji = Jr * ca.repmat(D.T, n, 1), Ji * ca.repmat(D.T, n, 1)
+            r = 1 / ca.sqrt(ca.sum2(Jr ** 2 + Ji ** 2))
+            Jr, Ji = Jr * ca.repmat(r, 1, n), Ji * ca.repmat(r, 1, n)
+            A = ca.blockcat([[Jr, -Ji], [Ji, Jr]])
+            b = ca.vertcat(br * r, bi * r)
+            u = ca.solve(A, b) if sx else ca.solve(A, b, "qr")
+            return u[:n] * D, u[n:] * D
+
+        def rhs(x, t):
+            TH, DTH = theta(t)
+            Jr, Ji, Tr, Ti = f_jt(x[0], x[1], TH[0], TH[1], DTH[0], DTH[1])
+            kr, ki = csolve(Jr, Ji, Tr, Ti, x)
+            return -kr, -ki
+
+        def absc(x):
+            return ca.sqrt(x[0] ** 2 + x[1] ** 2)
+
+        Xa = (s[0:n], s[n:2 * n])
+        t, h, st, cnt = s[2 * n + _T], s[2 * n + _H], s[2 * n + _ST], s[2 * n + _CNT]
+        run = st == 0
+        ha = ca.fmin(h, 1 - t)
+        k1 = rhs(Xa, t)
+        k2 = rhs((Xa[0] + 0.5 * ha * k1[0], Xa[1] + 0.5 * ha * k1[1]), t + 0.5 * ha)
+        k3 = rhs((Xa[0] + 0.5 * ha * k2[0], Xa[1] + 0.5 * ha * k2[1]), t + 0.5 * ha)
+        k4 = rhs((Xa[0] + ha * k3[0], Xa[1] + ha * k3[1]), t + ha)
+        Xp = tuple(Xa[i] + ha / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]) for i in (0, 1))
+        tn = t + ha
+        THn, _ = theta(tn)
+        ok = _finite(ca.vertcat(*Xp))
+        Xp = tuple(ca.if_else(ok, Xp[i], Xa[i]) for i in (0, 1))
+        size = 1 + ca.mmax(absc(Xp) / sc)
+        prev = ca.inf
+        first = None
+        for _ in range(newton):
+            Hr, Hi, Jr, Ji = f_hj(Xp[0], Xp[1], THn[0], THn[1])
+            dx = csolve(Jr, Ji, Hr, Hi, Xp)
+            fin = _finite(ca.vertcat(*dx))
+            nrm = ca.if_else(fin, ca.mmax(absc(dx) / sc) / size, ca.inf)
+            if first is None:
+                first = nrm
+            ok = ca.logic_and(ca.logic_and(ok, fin), ca.logic_or(
+                nrm <= ca.fmax(0.5 * prev, 1e-9), prev <= NOISE))
+            Xp = tuple(Xp[i] - ca.if_else(ok, dx[i], 0) for i in (0, 1))
+            prev = nrm
+        small = ca.mmax(absc((Xa[0] - Xp[0], Xa[1] - Xp[1])) / sc)
+        accept = ca.logic_and(ca.logic_and(ok, prev <= accept_tol),
+                              small <= 0.5 + 0.5 * ca.mmax(absc(Xa)))
+        acc = ca.logic_and(run, accept)
+        X1 = tuple(ca.if_else(acc, Xp[i], Xa[i]) for i in (0, 1))
+        t1 = ca.if_else(acc, tn, t)
+        hgrow = ca.fmin(h * ca.if_else(first < 1e-7, 2.0, grow), hmax)
+        h1 = ca.if_else(run, ca.if_else(accept, hgrow, 0.5 * h), h)
+        far = ca.mmax(absc(X1) / sc) > big
+        code = ca.if_else(far, ca.if_else(t1 >= 0.99, 2, 3),
+                          ca.if_else(ca.logic_and(ca.logic_not(accept), h1 < hmin), 3,
+                                     ca.if_else(t1 >= 1.0, 1, 0)))
+        st1 = ca.if_else(run, code, st)
+        s1 = ca.vertcat(X1[0], X1[1], t1, h1, st1, cnt + run)
+        step = ca.Function("homotopy_step", [s, par], [s1])
+        S = s
+        for _ in range(CHUNK):
+            S = step(S, par)
+        self.chunk = ca.Function("homotopy_chunk", [s, par], [S])
+        from ..model import compiled as cc
+
+        lib = cc.library(f"homotopy_track:{sys.key}", [self.chunk])
+        self.compiled = lib is not None
+        if lib is not None:
+            self.chunk = lib[self.chunk.name()]
+        self._maps: dict[int, Any] = {}
+
+    def _map(self, N: int):
+        from ..model.compiled import FastFn
+
+        fm = self._maps.get(N)
+        if fm is None:
+            fm = self._maps[N] = FastFn(self.chunk.map(f"homotopy_chunk_{N}", "serial", N,
+                                                       [1], []))
+        return fm
+
+    def run(self, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray, gamma: complex,
+            max_steps: int = 5000):
+        """(X, status, t, steps) after tracking the rows of X0 from th0 to th1."""
+        N, n = X0.shape
+        S = np.zeros((N, 2 * n + 4))
+        S[:, :n], S[:, n:2 * n] = X0.real, X0.imag
+        S[:, 2 * n + _H] = self.h0
+        d = th1 - th0
+        par = np.concatenate([th0.real, th0.imag, d.real, d.imag, [gamma.real, gamma.imag]])
+        act = np.arange(N)
+        steps = 0
+        while act.size and steps < max_steps:
+            fm = self._map(act.size)
+            (out,) = fm(S[act].ravel(), par)
+            S[act] = out.reshape(act.size, 2 * n + 4)
+            steps += CHUNK
+            act = act[S[act, 2 * n + _ST] == 0]
+        X = S[:, :n] + 1j * S[:, n:2 * n]
+        status = _CODES[S[:, 2 * n + _ST].astype(int)]
+        status[status == "running"] = "failed"
+        return X, status, S[:, 2 * n + _T], int(S[:, 2 * n + _CNT].max(initial=0))
+
+
+def _tracker(model) -> _Tracker | None:
+    """The topology's compiled tracker, or None without a compiler."""
+    def build():
+        sys = _system(model)
+        if not sys.compiled:
+            return None
+        tr = _Tracker(sys)
+        return tr if tr.compiled else None
+
+    return model.topology.cached("homotopy:tracker", build)
+
+
 # ---------------------------------------------------------------------------------------
 # path tracking
 # ---------------------------------------------------------------------------------------
@@ -153,12 +359,29 @@ class _Paths:
     steps: int  # loop iterations (steps of the slowest path)
 
 
+#: Systems of at most this many unknowns: one SX graph per compiled step, solved
+#: without equilibration.
+SMALL = 4
+
+#: Gamma paths tried before a call reports failed paths (each is a new random path).
+TRIES = 6
+
+#: A Newton update this small (relative to the point) has converged: the next ones need
+#: not contract further.
+NOISE = 1e-7
+
+
 def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
-          gamma: complex, tol: float = 1e-10, h0: float = 0.02, hmax: float = 0.1,
+          gamma: complex, tol: float = 1e-10, h0: float = 0.05, hmax: float = 0.25,
           hmin: float = 1e-12, big: float = 1e8, max_steps: int = 5000,
-          accept_tol: float = 1e-6, grow: float = 1.25) -> _Paths:
-    """Track the solutions X0 (N, n) of H(.; th0) to H(.; th1) along the gamma path."""
+          accept_tol: float = 1e-6, grow: float = 1.25,
+          tracker: _Tracker | None = None) -> _Paths:
+    """Track the solutions X0 (N, n) of H(.; th0) to H(.; th1) along the gamma path
+    (by ``tracker``, compiled, when given: then the step parameters are its own)."""
     N, n = X0.shape
+    if tracker is not None:
+        X, status, t, steps = tracker.run(X0, th0, th1, gamma, max_steps)
+        return _polish(sys, X, status, t, steps, th1)
     sc = sys.scale
     d = th1 - th0
 
@@ -170,7 +393,7 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
     def rhs(X, t):
         TH, DTH = theta(t)
         _, J, Ht = sys.eval(X, TH, DTH)
-        return -_enum.solve_rows(J, Ht)
+        return -_solve_scaled(J, Ht, X, sc)
 
     X = X0.astype(complex).copy()
     t = np.zeros(N)
@@ -201,11 +424,13 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
         first_nrm = None
         for _ in range(3):
             H, J, _ = sys.eval(Xp, TH, DTH)
-            dx = _enum.solve_rows(J, H)
+            dx = _solve_scaled(J, H, Xp, sc)
             nrm = np.max(np.abs(dx) / sc, axis=1) / size
             if first_nrm is None:
                 first_nrm = np.where(np.isfinite(nrm), nrm, np.inf)
-            ok &= np.isfinite(nrm) & (nrm <= np.maximum(0.5 * prev, 1e-9))
+            # contracting, unless already converged to the working accuracy (where a path
+            # swings far out the updates stall at noise of 1e-8 relative, not below)
+            ok &= np.isfinite(nrm) & ((nrm <= np.maximum(0.5 * prev, 1e-9)) | (prev <= NOISE))
             Xp = Xp - np.where(ok[:, None], dx, 0)
             prev = np.where(np.isfinite(nrm), nrm, np.inf)
         small = np.max(np.abs(Xa - Xp) / sc, axis=1)
@@ -226,14 +451,20 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
         status[rej[h[rej] < hmin]] = "failed"
         status[act[(t[act] >= 1.0) & (status[act] == "running")]] = "finite"
     status[status == "running"] = "failed"
-    cond = np.full(N, np.inf)
+    return _polish(sys, X, status, t, steps, th1)
+
+
+def _polish(sys: _System, X, status, t, steps, th1) -> _Paths:
+    """Newton at the target on the finite endpoints, and their condition numbers."""
+    sc = sys.scale
+    cond = np.full(X.shape[0], np.inf)
     fin = np.flatnonzero(status == "finite")
     if fin.size:
         TH = np.repeat(th1[None, :], fin.size, axis=0)
         Xf = X[fin]
         for _ in range(3):  # polish at the target
             H, J, _ = sys.eval(Xf, TH, np.zeros_like(TH))
-            dx = _enum.solve_rows(J, H)
+            dx = _solve_scaled(J, H, Xf, sc)
             good = np.all(np.isfinite(dx), axis=1)
             Xf = Xf - np.where(good[:, None], dx, 0)
         _, J, _ = sys.eval(Xf, TH, np.zeros_like(TH))
@@ -312,6 +543,7 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60) -> S
     bound = _enum.known_bound(model)
     t0 = time.perf_counter()
     sys = _system(model)
+    tr = _tracker(model)
     rng = np.random.default_rng([int(seed), 7])
     sc = sys.scale
     x0 = sc * (rng.normal(size=sys.n) + 1j * rng.normal(size=sys.n))
@@ -327,7 +559,7 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60) -> S
         Y = S
         for a, b in ((th, th1), (th1, th2), (th2, th)):
             g = np.exp(2j * np.pi * rng.uniform())
-            P = track(sys, Y, a, b, g)
+            P = track(sys, Y, a, b, g, tracker=tr)
             Y = P.x[P.status == "finite"]
             if Y.size == 0:
                 break
@@ -425,6 +657,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     qa = check_qa(model, qa)
     t0 = time.perf_counter()
     sys = _system(model)
+    tr = _tracker(model)
     if start is None:
         start = model.topology.cached(("homotopy:start", int(seed)),
                                       lambda: load_or_build_start(model, seed))
@@ -436,10 +669,10 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     # path that fails (one that swings far out near parameters where a solution goes to
     # infinity) sends all of them along another gamma, up to ``tries`` times
     P, tries = None, 0
-    while tries < 3:
+    while tries < TRIES:
         tries += 1
         gamma = np.exp(2j * np.pi * rng.uniform())
-        Q = track(sys, start.solutions, start.theta, target, gamma, tol=tol)
+        Q = track(sys, start.solutions, start.theta, target, gamma, tol=tol, tracker=tr)
         if P is None or np.sum(Q.status == "failed") < np.sum(P.status == "failed"):
             P = Q
         if not np.any(P.status == "failed"):
@@ -474,7 +707,8 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     account = EnumerationStats("homotopy", start.root_count, int(fin.size), n_inf,
                                int(singular.sum()), n_fail, start.root_count, complete)
     msg = (f"{len(out)} real assembly modes from {start.root_count} paths: {fin.size} "
-           f"finite ({int(singular.sum())} singular), {n_inf} at infinity, {n_fail} failed"
+           f"finite ({int(singular.sum())} singular), {n_inf} at infinity"
+           + f", {n_fail} failed"
            + (f", {jumped} path jumps" if jumped else "")
            + ("; every path accounted for" if complete else "; not every path accounted for")
            + (f"; the start system has {start.root_count} of the {bound} solutions the "
