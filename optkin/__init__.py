@@ -34,6 +34,10 @@ _LAZY: dict[str, str] = {
     "aspects": "optkin.analysis.aspects",
     "workspace": "optkin.analysis.aspects",
     "SingularCurves": "optkin.analysis.continuation",
+    "Cuspidality": "optkin.analysis.cusps",
+    "ModeChangePath": "optkin.analysis.cusps",
+    "is_cuspidal": "optkin.analysis.cusps",
+    "mode_change_path": "optkin.analysis.cusps",
     "singular_curves": "optkin.analysis.continuation",
     "Leg": "optkin.mechanism",
     "Mechanism": "optkin.mechanism",
@@ -57,12 +61,14 @@ __all__ = [
     "Aspects",
     "BatchResult",
     "Certificate",
+    "Cuspidality",
     "DofReport",
     "Jacobians",
     "KinResult",
     "Leg",
     "Mechanism",
     "MechanismError",
+    "ModeChangePath",
     "OptkinError",
     "ProblemFileError",
     "SingularCurves",
@@ -83,8 +89,10 @@ __all__ = [
     "forward_batch",
     "get_model",
     "inverse",
+    "is_cuspidal",
     "jacobians",
     "mechanisms",
+    "mode_change_path",
     "plot",
     "plot_singularity_map",
     "singular_curves",
@@ -127,6 +135,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     )
     from .analysis.aspects import Aspects, Workspace, aspects, workspace
     from .analysis.continuation import SingularCurves, singular_curves
+    from .analysis.cusps import Cuspidality, ModeChangePath, is_cuspidal, mode_change_path
     from .mechanism import Leg, Mechanism
     from .model import get_model
     from .results import KinResult, SolutionSet, SolverStats
