@@ -16,6 +16,7 @@ from test_assembly_modes import (
     DIET_B,
     DIET_L,
     _matches,
+    circle_intersections,
     five_bar_reference,
     rpr_reference,
 )
@@ -174,3 +175,51 @@ def test_random_stewart_platforms_match_the_multistart():
 def test_hundred_random_stewart_platforms_match_the_multistart():
     """The issue's 100 generic instances (measured here: 100 of 100)."""
     _check_against_multistart(_random_stewart_platforms(100, 12))
+
+
+def test_khalil_four_bar_against_circle_intersections():
+    """A Khalil table: its zero offsets and twists stay fixed in the start system (a
+    planar loop stays planar), which then has the 2 solutions of the four-bar."""
+    rng = np.random.default_rng(8)
+    both = 0
+    for _ in range(40):
+        L1, L2, L3, L4 = rng.uniform(0.5, 2.5, 4)
+        th = rng.uniform(-np.pi, np.pi)
+        B, D = L1 * np.array([np.cos(th), np.sin(th)]), np.array([L4, 0.0])
+        ref = circle_intersections(B, L2, D, L3) or []
+        m = optkin.mechanisms.four_bar(L1, L2, L3, L4)
+        modes = optkin.assembly_modes(m, [th], method="homotopy")
+        assert modes.complete and modes.stats.root_count == 2, modes.info["message"]
+        assert len(modes) == len(ref)
+        iphi = m.joint_names.index("phi")
+        for C in ref:
+            want = np.arctan2(C[1] - D[1], C[0] - D[0])
+            assert min(abs(np.angle(np.exp(1j * (r.q[iphi] - want)))) for r in modes) < 1e-8
+        both += len(ref) == 2
+    assert both >= 10
+
+
+def test_khalil_sr400_against_the_multistart():
+    m = optkin.mechanisms.sr400()
+    rng = np.random.default_rng(1)
+    for _ in range(4):
+        qa = rng.uniform(-1, 1, 6)
+        hom = optkin.assembly_modes(m, qa, method="homotopy")
+        ref = optkin.assembly_modes(m, qa)
+        assert hom.complete, hom.info["message"]
+        assert len(hom) == len(ref) >= 1
+        for r in hom:
+            assert min(np.max(np.abs(np.angle(np.exp(1j * (r.x - q.x))))) for q in ref) < 1e-8
+
+
+def test_time_limit_stops_a_monodromy_that_does_not_end(monkeypatch, tmp_path):
+    """The 3-RPS written at joint level: monodromy keeps finding solutions (thousands);
+    the call stops at the time budget, says so, and stores nothing."""
+    monkeypatch.setenv("OPTKIN_TIME_BUDGET", "2")
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+    m = optkin.mechanisms.rps3()
+    modes = optkin.assembly_modes(m, [1.03, 1.03, 1.03], method="homotopy")
+    assert not modes.complete and modes.info["status"] == "iteration_limit"
+    assert modes.info["monodromy_stopped"] == "time"
+    assert "time limit" in modes.info["message"]
+    assert not list(tmp_path.glob("optkin_start_*.npz"))

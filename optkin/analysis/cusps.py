@@ -182,7 +182,7 @@ class ModeChangePath:
                         label="base joints")
         n_legs = len(draws[0].legs)
         lines = [axm.plot([], [], "o-", lw=2, ms=4, color="C0" if j < n_legs else "C1",
-                          label=("legs" if j == 0 else "platform" if j == n_legs else None))[0]
+                          label=("leg chains" if j == 0 else "platform" if j == n_legs else None))[0]
                  for j in range(len(draws[0].lines))]
         axm.legend(loc="upper right", fontsize=8)
         self.plot(ax=axq)

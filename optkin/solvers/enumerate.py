@@ -884,7 +884,8 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         checkpoint()
         from .homotopy import homotopy_modes
 
-        modes = homotopy_modes(mech, qa, seed=int(seed), tol=o["tol"])
+        modes = homotopy_modes(mech, qa, seed=int(seed), tol=o["tol"],
+                               time_limit=o["time_limit"])
         if o["certify"] and len(modes):
             from .certify import certify_point, mark_overlaps
 

@@ -9,7 +9,8 @@ of any square model:
   offset c as parameters theta = (q_a, p, c), H(x; theta) = F(x; q_a, p) - c. Its value, its
   Jacobian in x and its derivative along a direction of theta are one CasADi Function,
   made complex by :func:`optkin.model.complexify.complexify` and mapped over the paths.
-* start systems by monodromy. At random complex parameters theta_0 (c_0 = F(x_0; q_a0, p_0)
+* start systems by monodromy. At random complex parameters theta_0 (geometry entries
+  equal to 0, +-pi/2 or +-pi kept: :func:`structural`; c_0 = F(x_0; q_a0, p_0)
   for a random complex x_0, which is then a solution by construction), the solutions are
   grown by loops theta_0 -> theta_1 -> theta_2 -> theta_0 through random complex
   parameters: each loop permutes the solutions, and new endpoints are new solutions. The
@@ -201,7 +202,9 @@ class _Tracker:
         n, nth = sys.n, sys.nth
         # small systems as one SX graph (the linear solves unrolled), larger ones as MX
         # (QR factorisations by CasADi's linear solver, a call to the system each)
-        sx = n <= SMALL if sx is None else sx
+        if sx is None:  # inlined only when small: a Khalil four-bar's inlined chunk has
+            # 369k instructions and takes gcc a minute (MX: calls, compiled in a second)
+            sx = n <= SMALL and sys.f_sx.n_instructions() <= 2000
         sym = ca.SX if sx else ca.MX
         self.n, self.nth, self.h0, self.hmax = n, nth, h0, hmax
         # the value and Jacobian (the corrector), the Jacobian and the parameter derivative
@@ -312,7 +315,7 @@ class _Tracker:
         return fm
 
     def run(self, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray, gamma: complex,
-            max_steps: int = 5000):
+            max_steps: int = 5000, deadline: Any = None):
         """(X, status, t, steps) after tracking the rows of X0 from th0 to th1."""
         N, n = X0.shape
         S = np.zeros((N, 2 * n + 4))
@@ -322,7 +325,8 @@ class _Tracker:
         par = np.concatenate([th0.real, th0.imag, d.real, d.imag, [gamma.real, gamma.imag]])
         act = np.arange(N)
         steps = 0
-        while act.size and steps < max_steps:
+        while act.size and steps < max_steps and not (deadline is not None
+                                                       and deadline.expired()):
             fm = self._map(act.size)
             (out,) = fm(S[act].ravel(), par)
             S[act] = out.reshape(act.size, 2 * n + 4)
@@ -375,12 +379,12 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
           gamma: complex, tol: float = 1e-10, h0: float = 0.05, hmax: float = 0.25,
           hmin: float = 1e-12, big: float = 1e8, max_steps: int = 5000,
           accept_tol: float = 1e-6, grow: float = 1.25,
-          tracker: _Tracker | None = None) -> _Paths:
+          tracker: _Tracker | None = None, deadline: Any = None) -> _Paths:
     """Track the solutions X0 (N, n) of H(.; th0) to H(.; th1) along the gamma path
     (by ``tracker``, compiled, when given: then the step parameters are its own)."""
     N, n = X0.shape
     if tracker is not None:
-        X, status, t, steps = tracker.run(X0, th0, th1, gamma, max_steps)
+        X, status, t, steps = tracker.run(X0, th0, th1, gamma, max_steps, deadline)
         return _polish(sys, X, status, t, steps, th1)
     sc = sys.scale
     d = th1 - th0
@@ -402,7 +406,7 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
     steps = 0
     while True:
         act = np.flatnonzero(status == "running")
-        if act.size == 0 or steps >= max_steps:
+        if act.size == 0 or steps >= max_steps or (deadline is not None and deadline.expired()):
             break
         steps += 1
         Xa, ta = X[act], t[act]
@@ -495,13 +499,14 @@ def _canonical(model, X: np.ndarray) -> np.ndarray:
 def _distinct(model, S: np.ndarray, Y: np.ndarray, tol: float = 1e-6) -> np.ndarray:
     """Rows of Y (canonical) not within tol (scaled) of a row of S or an earlier row of Y."""
     sc = np.asarray(model.x_scale, dtype=float)
-    keep = []
-    pool = list(S)
+    pool = np.zeros((len(S) + len(Y), Y.shape[1]), dtype=complex)
+    pool[:len(S)] = S
+    n0 = n = len(S)
     for y in Y:
-        if all(np.max(np.abs(y - s) / sc) > tol for s in pool):
-            keep.append(y)
-            pool.append(y)
-    return np.array(keep).reshape(-1, Y.shape[1])
+        if n == 0 or np.min(np.max(np.abs(pool[:n] - y) / sc, axis=1)) > tol:
+            pool[n] = y
+            n += 1
+    return pool[n0:n].copy()
 
 
 # ---------------------------------------------------------------------------------------
@@ -517,10 +522,32 @@ class StartSystem:
     solutions: np.ndarray
     loops: int
     time: float
+    #: why monodromy stopped: "bound" (the structure's known count reached), "stale"
+    #: (``stale`` loops found nothing), "max_loops" or "time" (the deadline; such a start
+    #: system is never stored or called complete)
+    stopped: str = "stale"
 
     @property
     def root_count(self) -> int:
         return int(self.solutions.shape[0])
+
+
+def structural(model) -> tuple[tuple[int, float], ...]:
+    """The geometry entries (positions in the homotopy's parameters) taken to define the
+    family rather than vary within it: those equal to 0, +-pi/2 or +-pi. In a Khalil
+    table they are parallel or perpendicular axes and zero offsets (a planar loop stays
+    planar only with them: randomised, the four-bar's start system was a spatial loop's,
+    and 6 of its 8 paths failed). They stay fixed, real, in the start system, which is
+    built and stored per pattern; a geometry with another pattern gets its own."""
+    sys = _system(model)
+    p = np.asarray(model.p, dtype=float)[sys.p_used]
+    special = np.array([0.0, np.pi / 2, -np.pi / 2, np.pi, -np.pi])
+    out = []
+    for k, v in enumerate(p):
+        hit = np.flatnonzero(np.abs(v - special) <= 1e-12)
+        if hit.size:
+            out.append((sys.na + k, float(special[hit[0]])))
+    return tuple(out)
 
 
 def _random_theta(sys: _System, model, rng, c: np.ndarray | None = None) -> np.ndarray:
@@ -528,18 +555,21 @@ def _random_theta(sys: _System, model, rng, c: np.ndarray | None = None) -> np.n
     size = float(model.length)
     qa = size * (rng.normal(size=sys.na) + 1j * rng.normal(size=sys.na))
     pp = p + (np.abs(p) + 0.1 * size) * (rng.normal(size=p.size) + 1j * rng.normal(size=p.size))
+    for k, v in structural(model):
+        pp[k - sys.na] = v
     if c is None:
         c = size * (rng.normal(size=sys.n) + 1j * rng.normal(size=sys.n))
     return np.concatenate([qa, pp, c])
 
 
-def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60) -> StartSystem:
+def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
+                 deadline: Any = None) -> StartSystem:
     """Monodromy: one solution by construction, grown by random loops (module docstring).
 
     Stops after ``stale`` loops in a row without a new solution, or at ``max_loops``;
     where the structure has a known bound on the number of solutions (distance legs:
     6, 40 or 2), reaching it stops at once and falling short of it never counts as
-    stale."""
+    stale. ``deadline`` (an :class:`optkin.limits.Deadline`) stops it too."""
     bound = _enum.known_bound(model)
     t0 = time.perf_counter()
     sys = _system(model)
@@ -552,14 +582,18 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60) -> S
     th[-sys.n:] = H[0]  # with c = 0, H(x0) = F(x0): c0 = F(x0) makes x0 a solution
     S = _canonical(model, x0[None, :])
     quiet = loops = 0
+    out_of_time = False
     while loops < max_loops and (bound is None or len(S) < bound) and (
             quiet < stale or (bound is not None and len(S) < bound)):
+        if deadline is not None and deadline.expired():
+            out_of_time = True
+            break
         loops += 1
         th1, th2 = _random_theta(sys, model, rng), _random_theta(sys, model, rng)
         Y = S
         for a, b in ((th, th1), (th1, th2), (th2, th)):
             g = np.exp(2j * np.pi * rng.uniform())
-            P = track(sys, Y, a, b, g, tracker=tr)
+            P = track(sys, Y, a, b, g, tracker=tr, deadline=deadline)
             Y = P.x[P.status == "finite"]
             if Y.size == 0:
                 break
@@ -569,7 +603,10 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60) -> S
             quiet = 0
         else:
             quiet += 1
-    return StartSystem(th, S, loops, time.perf_counter() - t0)
+    stopped = ("time" if out_of_time or (deadline is not None and deadline.expired()) else
+               "bound" if bound is not None and len(S) >= bound else
+               "stale" if quiet >= stale else "max_loops")
+    return StartSystem(th, S, loops, time.perf_counter() - t0, stopped)
 
 
 # ---------------------------------------------------------------------------------------
@@ -588,7 +625,8 @@ def _start_path(model, seed: int):
     d = cc.cache_dir()
     if d is None:
         return None
-    key = f"{model.topology.key}|{START_VERSION}|{int(seed)}|{ca.__version__}"
+    key = (f"{model.topology.key}|{START_VERSION}|{int(seed)}|{ca.__version__}|"
+           f"{structural(model)}")
     return d / f"optkin_start_{hashlib.sha256(key.encode()).hexdigest()[:24]}.npz"
 
 
@@ -597,6 +635,8 @@ def _verified(model, theta: np.ndarray, sols: np.ndarray) -> bool:
     foreign file is recomputed, never trusted)."""
     sys = _system(model)
     if theta.shape != (sys.nth,) or sols.ndim != 2 or sols.shape[1] != sys.n or not len(sols):
+        return False
+    if any(theta[k] != v for k, v in structural(model)):  # another family's start system
         return False
     n = sols.shape[0]
     Hv, J, _ = sys.eval(sols, np.repeat(theta[None], n, 0), np.zeros((n, sys.nth), complex))
@@ -608,7 +648,7 @@ def _verified(model, theta: np.ndarray, sols: np.ndarray) -> bool:
     return _distinct(model, np.zeros((0, sys.n)), _canonical(model, sols)).shape[0] == n
 
 
-def load_or_build_start(model, seed: int = 0) -> StartSystem:
+def load_or_build_start(model, seed: int = 0, deadline: Any = None) -> StartSystem:
     """The topology's start system for ``seed``: from the disk cache (beside the compiled
     code) when a stored one verifies, else built by :func:`start_system` and stored."""
     from ..model.compiled import _read_private
@@ -621,19 +661,21 @@ def load_or_build_start(model, seed: int = 0) -> StartSystem:
             with np.load(io.BytesIO(_read_private(path, 1 << 26)), allow_pickle=False) as z:
                 theta, sols = z["theta"], z["solutions"]
                 loops, took = int(z["loops"]), float(z["time"])
-            if _verified(model, theta, sols):
-                return StartSystem(theta, sols, loops, took)
+                stopped = str(z["stopped"]) if "stopped" in z.files else "stale"
+            if _verified(model, theta, sols) and stopped in ("bound", "stale", "max_loops"):
+                return StartSystem(theta, sols, loops, took, stopped)
         except (OSError, ValueError, KeyError):
             pass
-    S = start_system(model, seed)
-    if path is not None:
+    S = start_system(model, seed, deadline=deadline)
+    if path is not None and S.stopped != "time":
         import os
         import tempfile
 
         try:
             fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".start-", suffix=".npz")
             with os.fdopen(fd, "wb") as f:
-                np.savez(f, theta=S.theta, solutions=S.solutions, loops=S.loops, time=S.time)
+                np.savez(f, theta=S.theta, solutions=S.solutions, loops=S.loops, time=S.time,
+                         stopped=S.stopped)
             os.replace(tmp, path)
         except OSError:
             pass
@@ -645,10 +687,16 @@ def load_or_build_start(model, seed: int = 0) -> StartSystem:
 # ---------------------------------------------------------------------------------------
 
 def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = None,
-                   tol: float = 1e-10) -> SolutionSet:
+                   tol: float = 1e-10, time_limit: float | None = None) -> SolutionSet:
     """Every real assembly mode of ``mech`` at ``qa`` by parameter homotopy (see the
     module docstring). ``start`` defaults to the topology's start system for ``seed``
-    (built by monodromy on first use and kept for the process)."""
+    (built by monodromy on first use and kept for the process).
+
+    ``time_limit`` (s) bounds the tracking; building a start system gets at least 60 s
+    or the time budget (:func:`optkin.limits.time_budget`) when smaller. Out of time, the
+    result says so (status ``"iteration_limit"``, ``complete`` False) and a start system
+    cut short is neither stored nor reused."""
+    from ..limits import Deadline, time_budget
     from ..model import get_model
     from .common import check_mechanism, check_qa, make_result, newton
 
@@ -658,9 +706,14 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     t0 = time.perf_counter()
     sys = _system(model)
     tr = _tracker(model)
+    budget = time_budget() if time_limit is None else min(float(time_limit), time_budget())
     if start is None:
-        start = model.topology.cached(("homotopy:start", int(seed)),
-                                      lambda: load_or_build_start(model, seed))
+        key = ("homotopy:start", int(seed), structural(model))
+        start = model.topology.cached(key, lambda: load_or_build_start(
+            model, seed, Deadline(min(max(60.0, budget), time_budget()))))
+        if start.stopped == "time":  # cut short: never reused
+            model.topology._store.pop(key, None)
+    deadline = Deadline(budget)
     t_start = time.perf_counter()
     target = np.concatenate([qa, np.asarray(model.p, dtype=float)[sys.p_used],
                              np.zeros(sys.n)]).astype(complex)
@@ -672,11 +725,13 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     while tries < TRIES:
         tries += 1
         gamma = np.exp(2j * np.pi * rng.uniform())
-        Q = track(sys, start.solutions, start.theta, target, gamma, tol=tol, tracker=tr)
+        Q = track(sys, start.solutions, start.theta, target, gamma, tol=tol, tracker=tr,
+                  deadline=deadline)
         if P is None or np.sum(Q.status == "failed") < np.sum(P.status == "failed"):
             P = Q
-        if not np.any(P.status == "failed"):
+        if not np.any(P.status == "failed") or deadline.expired():
             break
+    late = deadline.expired()
     sc = sys.scale
     fin = np.flatnonzero(P.status == "finite")
     Xf = _canonical(model, P.x[fin])
@@ -692,8 +747,10 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
         if not ok:
             continue
         x1 = model.canonical_x(x1)
-        if any(np.max(np.abs(x1 - s) / sc) < 1e-6 for s in seen):
-            continue
+        ang = np.asarray(model.x_angle, dtype=bool)
+        if any(np.max(np.where(ang, np.abs(np.mod(x1 - s + np.pi, 2 * np.pi) - np.pi),
+                               np.abs(x1 - s)) / sc) < 1e-6 for s in seen):
+            continue  # the same mode (angles compared modulo 2 pi: pi and -pi are one)
         seen.append(x1)
         stats = SolverStats("parameter-homotopy", start.time, time.perf_counter() - t_start,
                             nit, "converged", {"paths": start.root_count})
@@ -703,7 +760,8 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     n_inf = int(np.sum(P.status == "at_infinity"))
     bound = _enum.known_bound(model)
     short = bound is not None and start.root_count < bound  # monodromy missed some
-    complete = n_fail == 0 and jumped == 0 and not short
+    cut = start.stopped == "time"
+    complete = n_fail == 0 and jumped == 0 and not short and not cut and not late
     account = EnumerationStats("homotopy", start.root_count, int(fin.size), n_inf,
                                int(singular.sum()), n_fail, start.root_count, complete)
     msg = (f"{len(out)} real assembly modes from {start.root_count} paths: {fin.size} "
@@ -712,10 +770,16 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
            + (f", {jumped} path jumps" if jumped else "")
            + ("; every path accounted for" if complete else "; not every path accounted for")
            + (f"; the start system has {start.root_count} of the {bound} solutions the "
-              "structure has: some modes may be missing" if short else ""))
-    info = {"success": bool(out), "status": "optimal" if out else "infeasible",
+              "structure has: some modes may be missing" if short else "")
+           + ("; monodromy stopped at the time limit: the start system may be incomplete"
+              if cut else "")
+           + (f"; tracking stopped at the time limit of {budget:g} s" if late else ""))
+    status = ("iteration_limit" if (late or cut) and not complete else
+              "optimal" if out else "infeasible")
+    info = {"success": bool(out) and not late, "status": status,
             "message": msg, "complete": complete, "root_count": start.root_count,
             "monodromy_loops": start.loops, "start_time": start.time, "gamma_tries": tries,
+            "monodromy_stopped": start.stopped,
             "time": time.perf_counter() - t0, "method": "homotopy"}
     return SolutionSet(out, "assembly modes", info, seed=int(seed), dimension=None,
                        stats=account)
