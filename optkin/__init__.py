@@ -34,6 +34,8 @@ _LAZY: dict[str, str] = {
     "aspects": "optkin.analysis.aspects",
     "workspace": "optkin.analysis.aspects",
     "SingularCurves": "optkin.analysis.continuation",
+    "Aspects3D": "optkin.analysis.aspects3d",
+    "aspects3d": "optkin.analysis.aspects3d",
     "Cuspidality": "optkin.analysis.cusps",
     "ModeChangePath": "optkin.analysis.cusps",
     "is_cuspidal": "optkin.analysis.cusps",
@@ -59,6 +61,7 @@ _LAZY: dict[str, str] = {
 
 __all__ = [
     "Aspects",
+    "Aspects3D",
     "BatchResult",
     "Certificate",
     "Cuspidality",
@@ -81,6 +84,7 @@ __all__ = [
     "Workspace",
     "__version__",
     "aspects",
+    "aspects3d",
     "assembly_modes",
     "certify",
     "classify",
@@ -134,6 +138,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
         plot_singularity_map,
     )
     from .analysis.aspects import Aspects, Workspace, aspects, workspace
+    from .analysis.aspects3d import Aspects3D, aspects3d
     from .analysis.continuation import SingularCurves, singular_curves
     from .analysis.cusps import Cuspidality, ModeChangePath, is_cuspidal, mode_change_path
     from .mechanism import Leg, Mechanism

@@ -375,7 +375,8 @@ def aspects(
         A planar platform whose legs are distance constraints with one actuator each
         (:func:`optkin.model.charts.planar_chart`): a 2-DoF point platform (the five-bar), or
         a 3-DoF platform in a section at fixed orientation (``fixed={"phi": value}``; the
-        aspects are then those of the section).
+        aspects are then those of the section). A 3-DoF platform without ``fixed`` gets
+        its aspects in (x, y, phi): :func:`optkin.analysis.aspects3d.aspects3d`.
     limits : dict name -> (lo, hi), optional
         Actuated joint limits (the passive joints are unlimited).
     bounds : [[lo, hi], [lo, hi]], optional
@@ -413,6 +414,13 @@ def aspects(
     [2, 3, 3, 2]
     """
     t0 = time.perf_counter()
+    if not fixed and isinstance(mech, Mechanism):
+        model = get_model(mech)
+        chart = planar_chart(model)
+        if chart is not None and chart.orientation and model.na == 3:
+            from .aspects3d import aspects3d  # a turning 3-DoF platform, no section
+
+            return aspects3d(mech, limits=limits, bounds=bounds)  # type: ignore[return-value]
     fixed, names, chart = _check_plane(mech, fixed)
     qa_grid = check_number("qa_grid", qa_grid, integer=True, low=2)
     lim_map = _limit_map(mech, names, limits)
@@ -588,6 +596,13 @@ def workspace(
     245.1
     """
     t0 = time.perf_counter()
+    if not fixed and isinstance(mech, Mechanism):
+        model = get_model(mech)
+        chart = planar_chart(model)
+        if chart is not None and chart.orientation and model.na == 3:
+            from .aspects3d import aspects3d  # a turning 3-DoF platform, no section
+
+            return aspects3d(mech, limits=limits, bounds=bounds)  # type: ignore[return-value]
     fixed, names, chart = _check_plane(mech, fixed)
     qa_grid = check_number("qa_grid", qa_grid, integer=True, low=2)
     lim_map = _limit_map(mech, names, limits)
