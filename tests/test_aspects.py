@@ -199,8 +199,8 @@ def test_pictures(tmp_path, asp, five_bar):
 
 def test_errors(five_bar):
     m = optkin.mechanisms.rpr3([[0, 0], [1, 0], [0, 1]], [[0, 0], [0.2, 0], [0, 0.2]])
-    with pytest.raises(optkin.MechanismError, match="phi"):
-        aspects(m)
+    with pytest.raises(optkin.MechanismError, match="phi"):  # a section is at fixed phi
+        aspects(m, fixed={"x": 0.1})
     with pytest.raises(optkin.MechanismError, match="actuated joint"):
         workspace(five_bar, limits={"x": (0, 1)})
 
