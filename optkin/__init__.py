@@ -36,6 +36,8 @@ _LAZY: dict[str, str] = {
     "SingularCurves": "optkin.analysis.continuation",
     "Aspects3D": "optkin.analysis.aspects3d",
     "aspects3d": "optkin.analysis.aspects3d",
+    "SingularSurface": "optkin.analysis.surfaces",
+    "singular_surfaces": "optkin.analysis.surfaces",
     "Cuspidality": "optkin.analysis.cusps",
     "ModeChangePath": "optkin.analysis.cusps",
     "is_cuspidal": "optkin.analysis.cusps",
@@ -75,6 +77,7 @@ __all__ = [
     "OptkinError",
     "ProblemFileError",
     "SingularCurves",
+    "SingularSurface",
     "SingularityReport",
     "SolutionSet",
     "SolverError",
@@ -100,6 +103,7 @@ __all__ = [
     "plot",
     "plot_singularity_map",
     "singular_curves",
+    "singular_surfaces",
     "statics",
     "track",
     "working_modes",
@@ -141,6 +145,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     from .analysis.aspects3d import Aspects3D, aspects3d
     from .analysis.continuation import SingularCurves, singular_curves
     from .analysis.cusps import Cuspidality, ModeChangePath, is_cuspidal, mode_change_path
+    from .analysis.surfaces import SingularSurface, singular_surfaces
     from .mechanism import Leg, Mechanism
     from .model import get_model
     from .results import KinResult, SolutionSet, SolverStats

@@ -1,0 +1,276 @@
+"""Singularity surfaces of 3-DoF planar platforms as triangulated meshes.
+
+The parallel singularities (det W_p = det A = 0) of a 3-DoF planar platform form a surface
+in the task space (x, y, phi) and, mapped through the closure, in the joint space. It is
+traced here section by section: the curves of :func:`optkin.singular_curves` at
+``slices`` values of the third coordinate (phi for ``space="task"``, the first actuated
+joint for ``space="joint"``), every point a corrected point of the augmented system
+[Phi; det W_p] (residual about 1e-11), then consecutive sections' curves are stitched
+into triangle strips: each curve is paired with the nearest curve of the next section
+(mean distance of its points, below ``link`` times the mechanism's size), closed curves
+are turned to start at matching points and to run the same way, and the strip takes at
+each step the shorter diagonal. A curve with no partner (where the section's topology
+changes between two slices) leaves an open edge, counted in ``open_curves``. Points
+outside the actuator strokes ``limits`` are left out.
+
+So the vertices are exact (on the surface to the corrector's tolerance) and the
+triangles interpolate between sections; the topology-changing sections are not yet
+located exactly (see the issue tracker).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import MechanismError
+from ..mechanism import Mechanism
+from ..model import get_model
+
+__all__ = ["SingularSurface", "singular_surfaces"]
+
+
+@dataclass
+class SingularSurface:
+    """A triangulated singularity surface (see :func:`singular_surfaces`).
+
+    Attributes
+    ----------
+    vertices : ndarray (V, 3)
+        Points of the surface in the space's three coordinates ``names``.
+    v : ndarray (V, na + nx)
+        The full configuration (q_a then x) at each vertex.
+    triangles : ndarray (T, 3) of int
+        Vertex indices.
+    residual : ndarray (V,)
+        max |[Phi; det W_p]| at each vertex (from the continuation's corrector).
+    sections : ndarray
+        The values of the third coordinate the curves were traced at.
+    open_curves : int
+        Curves left unstitched on one side (topology changes between sections).
+    """
+
+    mechanism: str
+    space: str
+    names: tuple[str, str, str]
+    vertices: np.ndarray
+    v: np.ndarray
+    triangles: np.ndarray
+    residual: np.ndarray
+    sections: np.ndarray
+    open_curves: int
+    success: bool
+    status: str
+    message: str
+    time: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        return (f"SingularSurface({self.mechanism!r}, {self.space}, {len(self.vertices)} "
+                f"vertices, {len(self.triangles)} triangles, status={self.status!r})")
+
+    @property
+    def max_residual(self) -> float:
+        return float(self.residual.max(initial=0.0))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"mechanism": self.mechanism, "space": self.space, "names": list(self.names),
+                "success": self.success, "status": self.status, "message": self.message,
+                "n_vertices": int(len(self.vertices)), "n_triangles": int(len(self.triangles)),
+                "max_residual": self.max_residual, "open_curves": self.open_curves,
+                "n_sections": int(len(self.sections)), "time": self.time}
+
+    def plot(self, path: str | None = None, ax: Any = None, title: str | None = None,
+             color: Any = None) -> Any:
+        """The surface (matplotlib ``plot_trisurf``), coloured by the third coordinate."""
+        from .aspects import _check_path, _save
+
+        _check_path(path)
+        import matplotlib.pyplot as plt
+
+        own = ax is None
+        if own:
+            fig = plt.figure(figsize=(7.5, 6.5))
+            ax = fig.add_subplot(projection="3d")
+        else:
+            fig = ax.figure
+        V, T = self.vertices, self.triangles
+        if len(T):
+            kw = {"color": color} if color is not None else {"cmap": "viridis"}
+            ax.plot_trisurf(V[:, 0], V[:, 1], V[:, 2], triangles=T, linewidth=0.1,
+                            edgecolor="0.3", alpha=0.85, **kw)
+        ax.set_xlabel(self.names[0])
+        ax.set_ylabel(self.names[1])
+        ax.set_zlabel(self.names[2])
+        ax.set_title(title or f"{self.mechanism}: parallel singularity surface "
+                     f"({self.space} space)")
+        if own and path is not None:
+            _save(fig, path)
+        return fig
+
+
+def _strip(A: np.ndarray, B: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> list[tuple]:
+    """Triangles between polylines A and B (point arrays, same orientation), choosing the
+    shorter diagonal at every step; ia, ib their vertex indices."""
+    tri = []
+    i = j = 0
+    na, nb = len(A), len(B)
+    while i < na - 1 or j < nb - 1:
+        if i == na - 1 or (j < nb - 1 and np.sum((A[i] - B[j + 1]) ** 2)
+                           <= np.sum((A[i + 1] - B[j]) ** 2)):
+            tri.append((ia[i], ib[j], ib[j + 1]))
+            j += 1
+        else:
+            tri.append((ia[i], ib[j], ia[i + 1]))
+            i += 1
+    return tri
+
+
+def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
+                      bounds: Any = None, slices: int = 72, step: float = 0.25,
+                      link: float = 0.6) -> SingularSurface:
+    """The parallel singularity surface of a 3-DoF planar platform as a triangle mesh
+    (see the module docstring).
+
+    Parameters
+    ----------
+    mech : Mechanism
+        A 3-DoF planar platform with distance legs.
+    space : "task" or "joint"
+        (x, y, phi), sections at fixed phi over [-pi, pi); or the actuated joints,
+        sections at fixed first actuated joint over its stroke (``limits``) or its range.
+    limits : dict name -> (lo, hi), optional
+        Actuator strokes: vertices outside them are left out.
+    bounds : [[lo, hi], [lo, hi]], optional
+        The box of the sections' plane.
+    slices : int
+        Sections.
+    step : float
+        Largest continuation step in each section (scaled units).
+    link : float
+        Largest mean distance between stitched curves, in mechanism sizes.
+    """
+    from .aspects import _limit_map
+    from .continuation import _names_of, singular_curves
+
+    t0 = time.perf_counter()
+    if space not in ("task", "joint"):
+        raise MechanismError(f"singular_surfaces: space must be 'task' or 'joint', got "
+                             f"{space!r}")
+    if not isinstance(slices, (int, np.integer)) or isinstance(slices, bool) or slices < 2:
+        raise MechanismError(f"singular_surfaces: slices must be an integer >= 2, got "
+                             f"{slices!r}")
+    model = get_model(mech)
+    turn = [n for n, a in zip(model.x_names, model.x_angle) if a]
+    if model.na != 3 or model.nx != 3 or len(turn) != 1:
+        raise MechanismError(f"singular_surfaces: {mech.name} is not a 3-DoF planar "
+                             "platform (three actuators; unknowns x, y and one orientation)")
+    names_all = _names_of(mech)
+    lim = _limit_map(mech, names_all, limits)
+    na = model.na
+    if space == "task":
+        third = turn[0]
+        values = np.linspace(-np.pi, np.pi, int(slices), endpoint=False)
+        plane, cols = "workspace", [na, na + 1, na + 2]
+        names = (model.x_names[0], model.x_names[1], third)
+    else:
+        third = names_all[0]
+        if 0 in lim:
+            lo, hi = lim[0]
+        else:
+            from ..model.charts import planar_chart
+
+            lo, hi = planar_chart(model).actuator_range(0)
+        values = np.linspace(lo, hi, int(slices) + 2)[1:-1]
+        plane, cols = "joint", [0, 1, 2]
+        names = (names_all[0], names_all[1], names_all[2])
+        names = (names[1], names[2], names[0])  # the section plane, then the fixed joint
+        cols = [1, 2, 0]
+    L = float(model.length)
+    secs: list[list[tuple[np.ndarray, np.ndarray, bool, np.ndarray]]] = []
+    failed = []
+    for val in values:
+        c = singular_curves(mech, plane=plane, kind="parallel", fixed={third: float(val)},
+                            bounds=bounds, step=step, cusps=False)
+        if not c.success:
+            failed.append((float(val), c.message))
+        pieces = []
+        for cv in c.curves:
+            keep = np.ones(len(cv.v), dtype=bool)
+            for j, (a, b) in lim.items():
+                keep &= (cv.v[:, j] >= a) & (cv.v[:, j] <= b)
+            if keep.all():
+                pieces.append((cv.v[:, cols], cv.v, cv.closed, cv.residual))
+                continue
+            # the runs inside the strokes, as open polylines
+            k = np.flatnonzero(np.diff(np.r_[0, keep.astype(int), 0]))
+            for s, e in zip(k[::2], k[1::2]):
+                if e - s >= 2:
+                    pieces.append((cv.v[s:e][:, cols], cv.v[s:e], False, cv.residual[s:e]))
+        secs.append(pieces)
+    # vertices
+    verts, full, res, index = [], [], [], []
+    n = 0
+    for pieces in secs:
+        idx = []
+        for P, V, _, r in pieces:
+            verts.append(P)
+            full.append(V)
+            res.append(r)
+            idx.append(np.arange(n, n + len(P)))
+            n += len(P)
+        index.append(idx)
+    scale = np.array([L, L, 1.0]) if space == "task" else np.array([L, L, L])
+    tri: list[tuple] = []
+    open_curves = 0
+    wrap = False  # the strip from phi = pi back to -pi would cross the picture
+    pairs = [(k, k + 1) for k in range(len(secs) - 1)] + ([(len(secs) - 1, 0)] if wrap else [])
+    for ka, kb in pairs:
+        used = set()
+        for ia, (A, _, ca_, _) in enumerate(secs[ka]):
+            best, bj = np.inf, None
+            for jb, (B, _, cb_, _) in enumerate(secs[kb]):
+                if jb in used or ca_ != cb_:
+                    continue
+                d = np.sqrt(((A[:, None, :2] - B[None, :, :2]) ** 2).sum(-1)).min(axis=1)
+                dm = float(np.mean(d)) / L
+                if dm < best:
+                    best, bj = dm, jb
+            if bj is None or best > link:
+                open_curves += 1
+                continue
+            used.add(bj)
+            B = secs[kb][bj][0]
+            Ia, Ib = index[ka][ia], index[kb][bj]
+            a2, b2 = A[:, :2] / scale[:2], B[:, :2] / scale[:2]
+            if ca_:  # closed: start B at the point nearest A's start, run the same way
+                s0 = int(np.argmin(((b2 - a2[0]) ** 2).sum(1)))
+                order = np.roll(np.arange(len(B)), -s0)
+                fwd = b2[order[min(1, len(order) - 1)]] - b2[order[0]]
+                if np.dot(a2[min(1, len(a2) - 1)] - a2[0], fwd) < 0:
+                    order = np.r_[order[0], order[1:][::-1]]
+                Ib = Ib[order]
+                b2 = b2[order]
+                a2 = np.vstack([a2, a2[:1]])
+                b2 = np.vstack([b2, b2[:1]])
+                Ia = np.r_[Ia, Ia[:1]]
+                Ib = np.r_[Ib, Ib[:1]]
+            elif np.sum((a2[0] - b2[0]) ** 2) > np.sum((a2[0] - b2[-1]) ** 2):
+                b2, Ib = b2[::-1], Ib[::-1]
+            tri += _strip(a2, b2, Ia, Ib)
+        open_curves += len(secs[kb]) - len(used)
+    V = np.vstack(verts) if verts else np.zeros((0, 3))
+    Vf = np.vstack(full) if full else np.zeros((0, na + model.nx))
+    R = np.concatenate(res) if res else np.zeros(0)
+    T = np.array(tri, dtype=int).reshape(-1, 3)
+    ok = not failed and len(T) > 0
+    msg = (f"{len(V)} vertices, {len(T)} triangles from {len(values)} sections in the "
+           f"{space} space; max residual {R.max(initial=0.0):.1e}; {open_curves} curve(s) "
+           "left open where the sections' topology changes"
+           + (f"; {len(failed)} section(s) incomplete: {failed[0][1]}" if failed else ""))
+    return SingularSurface(mech.name, space, names, V, Vf, T, R, np.asarray(values),
+                           open_curves, ok, "optimal" if ok else "inaccurate", msg,
+                           time.perf_counter() - t0)

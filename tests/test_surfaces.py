@@ -1,0 +1,70 @@
+"""Parallel singularity surfaces of a 3-DoF planar platform (optkin.analysis.surfaces).
+
+Evidence, written here: at a parallel singularity of a 3-RPR the three leg lines are
+concurrent or parallel, i.e. the determinant of their homogeneous line coordinates
+(A_i x P_i, with A_i the base and P_i the platform point as (x, y, 1)) vanishes; the
+vertices' leg lengths are the distances |P_i - A_i| and lie within the strokes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_continuation import BASE3, PLAT3
+
+import optkin
+from optkin.analysis.surfaces import singular_surfaces
+
+LIMITS = {f"L{i}.rho": (10.0, 30.0) for i in (1, 2, 3)}
+
+
+def _legs(x, y, phi):
+    c, s = np.cos(phi), np.sin(phi)
+    P = np.stack([x[:, None] + c[:, None] * PLAT3[None, :, 0] - s[:, None] * PLAT3[None, :, 1],
+                  y[:, None] + s[:, None] * PLAT3[None, :, 0] + c[:, None] * PLAT3[None, :, 1]],
+                 -1)
+    return P  # (N, 3, 2) platform points
+
+
+def _concurrency(x, y, phi):
+    """det of the three leg lines' homogeneous coordinates, each normalised to unit
+    (a, b): zero when the lines meet in one point or are parallel."""
+    P = _legs(x, y, phi)
+    A = np.broadcast_to(BASE3, P.shape)
+    h = lambda Q: np.concatenate([Q, np.ones(Q.shape[:-1] + (1,))], -1)  # noqa: E731
+    lines = np.cross(h(A), h(P))
+    lines /= np.linalg.norm(lines[..., :2], axis=-1, keepdims=True)
+    return np.linalg.det(lines)
+
+
+@pytest.fixture(scope="module")
+def rpr():
+    return optkin.mechanisms.rpr3(BASE3, PLAT3)
+
+
+@pytest.mark.parametrize("space", ["task", "joint"])
+def test_vertices_make_the_legs_concurrent(rpr, space):
+    s = singular_surfaces(rpr, space=space, limits=LIMITS, slices=24)
+    assert s.success, s.message
+    assert len(s.triangles) > 100 and s.max_residual < 1e-9
+    x, y, phi = s.v[:, 3], s.v[:, 4], s.v[:, 5]
+    d = _concurrency(x, y, phi)
+    assert np.max(np.abs(d)) < 1e-6, np.max(np.abs(d))
+    rho = np.linalg.norm(_legs(x, y, phi) - BASE3[None], axis=-1)
+    np.testing.assert_allclose(rho, s.v[:, :3], atol=1e-8)
+    assert rho.min() >= 10 - 1e-9 and rho.max() <= 30 + 1e-9
+    # the test discriminates: ordinary configurations are far from concurrent
+    rng = np.random.default_rng(0)
+    far = _concurrency(rng.uniform(-5, 5, 50), rng.uniform(-5, 5, 50),
+                       rng.uniform(-np.pi, np.pi, 50))
+    assert np.median(np.abs(far)) > 1e-2
+    # the mesh indexes its vertices, and the third coordinate is the section's
+    assert s.triangles.max() < len(s.vertices)
+    assert set(np.round(s.vertices[:, 2], 12)) <= set(np.round(s.sections, 12))
+
+
+def test_arguments(rpr):
+    with pytest.raises(optkin.MechanismError, match="space must be 'task' or 'joint'"):
+        singular_surfaces(rpr, space="both")
+    with pytest.raises(optkin.MechanismError, match="not a 3-DoF planar platform"):
+        singular_surfaces(optkin.mechanisms.five_bar(9, 8, 5, 5, 8))
