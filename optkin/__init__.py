@@ -39,6 +39,8 @@ _LAZY: dict[str, str] = {
     "SingularSurface": "optkin.analysis.surfaces",
     "singular_surfaces": "optkin.analysis.surfaces",
     "Cuspidality": "optkin.analysis.cusps",
+    "CuspCurves": "optkin.analysis.cusps",
+    "cusp_curves": "optkin.analysis.cusps",
     "ModeChangePath": "optkin.analysis.cusps",
     "is_cuspidal": "optkin.analysis.cusps",
     "mode_change_path": "optkin.analysis.cusps",
@@ -66,6 +68,7 @@ __all__ = [
     "Aspects3D",
     "BatchResult",
     "Certificate",
+    "CuspCurves",
     "Cuspidality",
     "DofReport",
     "Jacobians",
@@ -91,6 +94,7 @@ __all__ = [
     "assembly_modes",
     "certify",
     "classify",
+    "cusp_curves",
     "dof",
     "forward",
     "forward_batch",
@@ -144,7 +148,14 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     from .analysis.aspects import Aspects, Workspace, aspects, workspace
     from .analysis.aspects3d import Aspects3D, aspects3d
     from .analysis.continuation import SingularCurves, singular_curves
-    from .analysis.cusps import Cuspidality, ModeChangePath, is_cuspidal, mode_change_path
+    from .analysis.cusps import (
+        CuspCurves,
+        Cuspidality,
+        ModeChangePath,
+        cusp_curves,
+        is_cuspidal,
+        mode_change_path,
+    )
     from .analysis.surfaces import SingularSurface, singular_surfaces
     from .mechanism import Leg, Mechanism
     from .model import get_model

@@ -141,3 +141,47 @@ def test_pictures(rpr, tmp_path):
     refused = mode_change_path(rpr, QA, 0, 1)
     with pytest.raises(optkin.MechanismError, match="no path"):
         refused.animate()
+
+
+def _cusp_ratio(rho1, psi, phi, e=1e-6):
+    """|J tau| / (|J| |tau|) at the configuration with leg 1 of length rho1 at angle psi
+    and orientation phi: tau the tangent of det A = 0 in (psi, phi), J the Jacobian of
+    (rho2, rho3); zero at a cusp of the section's joint-space curve (finite differences,
+    as in tests/test_continuation.py, with rho1 free)."""
+    def pose(a, b):
+        c, s = np.cos(b), np.sin(b)
+        x = BASE3[0, 0] + rho1 * np.cos(a) - (c * PLAT3[0, 0] - s * PLAT3[0, 1])
+        y = BASE3[0, 1] + rho1 * np.sin(a) - (s * PLAT3[0, 0] + c * PLAT3[0, 1])
+        rh = [np.hypot(x + c * bb[0] - s * bb[1] - A[0], y + s * bb[0] + c * bb[1] - A[1])
+              for A, bb in zip(BASE3[1:], PLAT3[1:])]
+        return x, y, np.array(rh)
+
+    def D(a, b):
+        x, y, _ = pose(a, b)
+        return rpr_det(x, y, b)
+
+    g = np.array([(D(psi + e, phi) - D(psi - e, phi)) / (2 * e),
+                  (D(psi, phi + e) - D(psi, phi - e)) / (2 * e)])
+    tau = np.array([-g[1], g[0]])
+    J = np.stack([(pose(psi + e, phi)[2] - pose(psi - e, phi)[2]) / (2 * e),
+                  (pose(psi, phi + e)[2] - pose(psi, phi - e)[2]) / (2 * e)], 1)
+    return np.linalg.norm(J @ tau) / (np.linalg.norm(J) * np.linalg.norm(tau))
+
+
+def test_cusp_curves_of_the_cuspidal_3rpr(rpr):
+    lim = {f"L{i}.rho": (10.0, 30.0) for i in (1, 2, 3)}
+    c = optkin.cusp_curves(rpr, limits=lim, slices=12)
+    assert c.success and len(c) >= 3, c.message
+    ratios = []
+    for V in c.v:
+        assert np.all(np.diff(V[:, 0]) > 0)  # ordered along rho1, one point per section
+        for v in V:
+            x, y, phi = v[3:]
+            P1 = np.array([x + np.cos(phi) * PLAT3[0, 0] - np.sin(phi) * PLAT3[0, 1],
+                           y + np.sin(phi) * PLAT3[0, 0] + np.cos(phi) * PLAT3[0, 1]])
+            psi = np.arctan2(*(P1 - BASE3[0])[::-1])
+            assert abs(np.hypot(*(P1 - BASE3[0])) - v[0]) < 1e-8
+            ratios.append(_cusp_ratio(v[0], psi, phi))
+            assert abs(rpr_det(x, y, phi)) < 1e-9 * 40**3
+    assert max(ratios) < 1e-4
+    assert all(10 <= p <= 30 for p in np.ravel(c.points))

@@ -38,7 +38,8 @@ from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
 
-__all__ = ["ModeChangePath", "mode_change_path", "Cuspidality", "is_cuspidal"]
+__all__ = ["ModeChangePath", "mode_change_path", "Cuspidality", "is_cuspidal", "CuspCurves",
+           "cusp_curves"]
 
 
 @dataclass
@@ -525,3 +526,153 @@ def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = No
                        f"{n_cusps} cusp(s) in {len(values)} section(s); not a proof that "
                        "the mechanism is noncuspidal", None, values, n_cusps,
                        time.perf_counter() - t0)
+
+
+@dataclass
+class CuspCurves:
+    """Cusp curves of a 3-DoF mechanism in its joint space (see :func:`cusp_curves`).
+
+    Attributes
+    ----------
+    curves : list of ndarray (k, na)
+        Each curve's points (actuated values), in order along the first actuated joint.
+    v : list of ndarray (k, na + nx)
+        The full configuration at each point (q_a then x): a cusp of the section through it.
+    points : ndarray (n, na)
+        Every cusp found, linked or not.
+    sections : ndarray
+        The values of the first actuated joint the sections were taken at.
+    """
+
+    mechanism: str
+    names: tuple[str, ...]
+    curves: list[np.ndarray]
+    v: list[np.ndarray]
+    points: np.ndarray
+    sections: np.ndarray
+    success: bool
+    status: str
+    message: str
+    time: float = 0.0
+
+    def __len__(self) -> int:
+        return len(self.curves)
+
+    def __repr__(self) -> str:
+        return (f"CuspCurves({self.mechanism!r}, {len(self.curves)} curve(s), "
+                f"{len(self.points)} cusp point(s), status={self.status!r})")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"mechanism": self.mechanism, "names": list(self.names),
+                "success": self.success, "status": self.status, "message": self.message,
+                "curves": [c.tolist() for c in self.curves],
+                "sections": self.sections.tolist(), "time": self.time}
+
+    def plot(self, path: str | None = None, ax: Any = None, title: str | None = None) -> Any:
+        """The cusp curves in the joint space (3-D axes; ``ax`` may be a 3-D Axes)."""
+        from .aspects import _check_path, _save
+
+        _check_path(path)
+        import matplotlib.pyplot as plt
+
+        own = ax is None
+        if own:
+            fig = plt.figure(figsize=(7, 6))
+            ax = fig.add_subplot(projection="3d")
+        else:
+            fig = ax.figure
+        for k, c in enumerate(self.curves):
+            ax.plot(c[:, 1], c[:, 2], c[:, 0], "-", color="tab:purple", lw=2,
+                    label="cusp curves" if k == 0 else None)
+        if len(self.points):
+            ax.scatter(self.points[:, 1], self.points[:, 2], self.points[:, 0], s=6,
+                       color="black", label="cusps of the sections")
+        ax.set_xlabel(self.names[1])
+        ax.set_ylabel(self.names[2])
+        ax.set_zlabel(self.names[0])
+        ax.legend(loc="upper left", fontsize=8)
+        ax.set_title(title or f"{self.mechanism}: cusp curves in the joint space")
+        if own and path is not None:
+            _save(fig, path)
+        return fig
+
+
+def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: int = 40,
+                slope: float = 4.0) -> CuspCurves:
+    """The cusp curves of a 3-DoF mechanism in its joint space: the cusps of the sections
+    at ``slices`` values of the first actuated joint (over its stroke in ``limits``, else
+    its range), each a corrected cusp of a traced singular curve, linked from section to
+    section (the nearest cusp of the next section in the other actuated joints, within
+    ``slope`` times the section step; one partner each).
+
+    The links interpolate between sections; where cusps are born or die in pairs (a
+    swallowtail) between two sections a curve ends.
+    """
+    from .aspects import _limit_map
+    from .continuation import _names_of, singular_curves
+
+    t0 = time.perf_counter()
+    who = "cusp_curves"
+    model = get_model(mech)
+    if model.na != 3:
+        raise MechanismError(f"{who}: needs 3 actuated joints, {mech.name} has {model.na}")
+    slices = _positive_int(who, "slices", slices)
+    names = _names_of(mech)
+    lim = _limit_map(mech, names, limits)
+    if 0 in lim:
+        lo, hi = lim[0]
+    else:
+        from ..model.charts import planar_chart
+
+        chart = planar_chart(model)
+        if chart is None:
+            raise MechanismError(f"{who}: give limits for {names[0]} (its range is not known)")
+        lo, hi = chart.actuator_range(0)
+    values = np.linspace(lo, hi, slices + 2)[1:-1]
+    gap = float(values[1] - values[0]) if len(values) > 1 else 1.0
+    per: list[np.ndarray] = []
+    failed = []
+    for val in values:
+        c = singular_curves(mech, plane="joint", fixed={names[0]: float(val)}, bounds=bounds,
+                            cusps=True)
+        if not c.success:
+            failed.append(c.message)
+        V = np.asarray(c.cusps, dtype=float).reshape(-1, len(c.names))
+        for j, (a, b) in lim.items():
+            V = V[(V[:, j] >= a) & (V[:, j] <= b)]
+        per.append(V)
+    # link section to section
+    chains: list[list[np.ndarray]] = []
+    open_ends: list[tuple[int, int]] = []  # (chain, index into the previous section)
+    for k, V in enumerate(per):
+        new_open = []
+        taken = set()
+        for ci, pi in open_ends:
+            prev = per[k - 1][pi]
+            if not len(V):
+                continue
+            # distance in the other actuated joints, against the section step: a cusp
+            # curve rises at most 1 / slope per unit of them
+            d = np.linalg.norm((V - prev)[:, 1:model.na], axis=1) / gap
+            for j in np.argsort(d):
+                if d[j] > slope:
+                    break
+                if j not in taken:
+                    taken.add(j)
+                    chains[ci].append(V[j])
+                    new_open.append((ci, int(j)))
+                    break
+        for j in range(len(V)):
+            if j not in taken:
+                chains.append([V[j]])
+                new_open.append((len(chains) - 1, j))
+        open_ends = new_open
+    vs = [np.array(c) for c in chains if len(c) >= 2]
+    pts = np.vstack(per)[:, :model.na] if any(len(v) for v in per) else np.zeros((0, 3))
+    ok = not failed
+    msg = (f"{len(vs)} cusp curve(s) through {len(pts)} cusps of {len(values)} sections "
+           f"({names[0]} from {values[0]:.4g} to {values[-1]:.4g})"
+           + (f"; {len(failed)} section(s) incomplete: {failed[0]}" if failed else ""))
+    return CuspCurves(mech.name, tuple(names[:model.na]), [v[:, :model.na] for v in vs], vs,
+                      pts, values, ok, "optimal" if ok else "inaccurate", msg,
+                      time.perf_counter() - t0)
