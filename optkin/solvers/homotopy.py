@@ -33,8 +33,10 @@ of any square model:
 
 The tracking is compiled: ``CHUNK`` predictor-corrector steps of a path are one CasADi
 Function (:class:`_Tracker`, built once per topology, mapped over the paths that are still
-running, their statuses read between calls); without a C compiler the same steps run as a
-numpy loop over the paths (:func:`track`).
+running, their statuses read between calls). Systems of more than :data:`SMALL` unknowns
+predict by a cubic Hermite extrapolation through the last two points and their tangents
+(one linear solve a step instead of RK4's four). Without a C compiler the RK4 steps run as
+a numpy loop over the paths (:func:`track`).
 
 The account: every path ends finite, at infinity, singular or failed; ``complete`` only when
 none failed and no two finite nonsingular endpoints coincide (path jumping). Not yet here:
@@ -198,8 +200,17 @@ class _Tracker:
 
     def __init__(self, sys: _System, tol: float = 1e-10, h0: float = 0.05, hmax: float = 0.25,
                  hmin: float = 1e-12, big: float = 1e8, accept_tol: float = 1e-6,
-                 grow: float = 1.25, sx: bool | None = None, newton: int = 3) -> None:
+                 grow: float = 1.25, sx: bool | None = None, newton: int = 3,
+                 predictor: str | None = None) -> None:
         n, nth = sys.n, sys.nth
+        # the predictor: RK4 (4 solves a step) for small systems, where it takes fewer
+        # steps; above, a cubic Hermite extrapolation through the last two points and
+        # their tangents (one solve a step): a 6-6 platform's 40 paths in 175 steps and
+        # 85 ms instead of 316 and 105 ms
+        if predictor is None:
+            predictor = "rk4" if n <= SMALL else "hermite"
+        if predictor not in ("rk4", "hermite"):
+            raise ValueError(f"predictor must be 'rk4' or 'hermite', got {predictor!r}")
         # small systems as one SX graph (the linear solves unrolled), larger ones as MX
         # (QR factorisations by CasADi's linear solver, a call to the system each)
         if sx is None:  # inlined only when small: a Khalil four-bar's inlined chunk has
@@ -207,6 +218,7 @@ class _Tracker:
             sx = n <= SMALL and sys.f_sx.n_instructions() <= 2000
         sym = ca.SX if sx else ca.MX
         self.n, self.nth, self.h0, self.hmax = n, nth, h0, hmax
+        self.sys = sys
         # the value and Jacobian (the corrector), the Jacobian and the parameter derivative
         # (the predictor): each without the work of the output it does not need
         ins = sys.f_sx.sx_in()
@@ -214,7 +226,9 @@ class _Tracker:
         f_hj = ca.Function("homotopy_hj", ins[:4], out[:4])
         f_jt = ca.Function("homotopy_jt", ins, out[2:])
         sc = ca.DM(sys.scale)
-        s = sym.sym("state", 2 * n + 4)
+        self.width = 2 * n + 4 + (6 * n + 2 if predictor == "hermite" else 0)
+        self.predictor = predictor
+        s = sym.sym("state", self.width)
         par = sym.sym("par", 4 * nth + 2)
         th0 = (par[0:nth], par[nth:2 * nth])
         d = (par[2 * nth:3 * nth], par[3 * nth:4 * nth])
@@ -255,11 +269,28 @@ class _Tracker:
         t, h, st, cnt = s[2 * n + _T], s[2 * n + _H], s[2 * n + _ST], s[2 * n + _CNT]
         run = st == 0
         ha = ca.fmin(h, 1 - t)
-        k1 = rhs(Xa, t)
-        k2 = rhs((Xa[0] + 0.5 * ha * k1[0], Xa[1] + 0.5 * ha * k1[1]), t + 0.5 * ha)
-        k3 = rhs((Xa[0] + 0.5 * ha * k2[0], Xa[1] + 0.5 * ha * k2[1]), t + 0.5 * ha)
-        k4 = rhs((Xa[0] + ha * k3[0], Xa[1] + ha * k3[1]), t + ha)
-        Xp = tuple(Xa[i] + ha / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]) for i in (0, 1))
+        hermite = predictor == "hermite"
+        if hermite:  # extra state: previous point, its t, both tangents, "has previous"
+            o = 2 * n + 4
+            xp = (s[o:o + n], s[o + n:o + 2 * n])
+            tp = s[o + 2 * n]
+            dx = (s[o + 2 * n + 1:o + 3 * n + 1], s[o + 3 * n + 1:o + 4 * n + 1])
+            dxp = (s[o + 4 * n + 1:o + 5 * n + 1], s[o + 5 * n + 1:o + 6 * n + 1])
+            hasp = s[o + 6 * n + 1]
+            D = t - tp
+            u = 1 + ha / ca.if_else(hasp > 0, D, 1.0)
+            h00, h10 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u
+            h01, h11 = -2 * u**3 + 3 * u**2, u**3 - u**2
+            herm = tuple(h00 * xp[i] + h10 * D * dxp[i] + h01 * Xa[i] + h11 * D * dx[i]
+                         for i in (0, 1))
+            Xp = tuple(ca.if_else(hasp > 0, herm[i], Xa[i] + ha * dx[i]) for i in (0, 1))
+        else:
+            k1 = rhs(Xa, t)
+            k2 = rhs((Xa[0] + 0.5 * ha * k1[0], Xa[1] + 0.5 * ha * k1[1]), t + 0.5 * ha)
+            k3 = rhs((Xa[0] + 0.5 * ha * k2[0], Xa[1] + 0.5 * ha * k2[1]), t + 0.5 * ha)
+            k4 = rhs((Xa[0] + ha * k3[0], Xa[1] + ha * k3[1]), t + ha)
+            Xp = tuple(Xa[i] + ha / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
+                       for i in (0, 1))
         tn = t + ha
         THn, _ = theta(tn)
         ok = _finite(ca.vertcat(*Xp))
@@ -269,14 +300,14 @@ class _Tracker:
         first = None
         for _ in range(newton):
             Hr, Hi, Jr, Ji = f_hj(Xp[0], Xp[1], THn[0], THn[1])
-            dx = csolve(Jr, Ji, Hr, Hi, Xp)
-            fin = _finite(ca.vertcat(*dx))
-            nrm = ca.if_else(fin, ca.mmax(absc(dx) / sc) / size, ca.inf)
+            up = csolve(Jr, Ji, Hr, Hi, Xp)
+            fin = _finite(ca.vertcat(*up))
+            nrm = ca.if_else(fin, ca.mmax(absc(up) / sc) / size, ca.inf)
             if first is None:
                 first = nrm
             ok = ca.logic_and(ca.logic_and(ok, fin), ca.logic_or(
                 nrm <= ca.fmax(0.5 * prev, 1e-9), prev <= NOISE))
-            Xp = tuple(Xp[i] - ca.if_else(ok, dx[i], 0) for i in (0, 1))
+            Xp = tuple(Xp[i] - ca.if_else(ok, up[i], 0) for i in (0, 1))
             prev = nrm
         small = ca.mmax(absc((Xa[0] - Xp[0], Xa[1] - Xp[1])) / sc)
         accept = ca.logic_and(ca.logic_and(ok, prev <= accept_tol),
@@ -292,6 +323,13 @@ class _Tracker:
                                      ca.if_else(t1 >= 1.0, 1, 0)))
         st1 = ca.if_else(run, code, st)
         s1 = ca.vertcat(X1[0], X1[1], t1, h1, st1, cnt + run)
+        if hermite:  # on acceptance: the tangent at the new point; the old one moves back
+            kn = rhs(Xp, tn)
+            keep = lambda a, b: ca.if_else(acc, a, b)  # noqa: E731
+            s1 = ca.vertcat(s1, keep(Xa[0], xp[0]), keep(Xa[1], xp[1]), keep(t, tp),
+                            keep(kn[0], dx[0]), keep(kn[1], dx[1]),
+                            keep(dx[0], dxp[0]), keep(dx[1], dxp[1]),
+                            ca.if_else(acc, 1.0, hasp))
         step = ca.Function("homotopy_step", [s, par], [s1])
         S = s
         for _ in range(CHUNK):
@@ -299,7 +337,7 @@ class _Tracker:
         self.chunk = ca.Function("homotopy_chunk", [s, par], [S])
         from ..model import compiled as cc
 
-        lib = cc.library(f"homotopy_track:{sys.key}", [self.chunk])
+        lib = cc.library(f"homotopy_track:{sys.key}:{predictor}", [self.chunk])
         self.compiled = lib is not None
         if lib is not None:
             self.chunk = lib[self.chunk.name()]
@@ -318,10 +356,19 @@ class _Tracker:
             max_steps: int = 5000, deadline: Any = None):
         """(X, status, t, steps) after tracking the rows of X0 from th0 to th1."""
         N, n = X0.shape
-        S = np.zeros((N, 2 * n + 4))
+        W = self.width
+        S = np.zeros((N, W))
         S[:, :n], S[:, n:2 * n] = X0.real, X0.imag
         S[:, 2 * n + _H] = self.h0
         d = th1 - th0
+        if self.predictor == "hermite":  # the tangent at the start points
+            TH = np.repeat(th0[None], N, 0)
+            DTH = np.repeat((gamma * d)[None], N, 0)
+            _, J, Ht = self.sys.eval(X0.astype(complex), TH, DTH)
+            k = -_solve_scaled(J, Ht, X0, self.sys.scale)
+            o = 2 * n + 4
+            S[:, o + 2 * n + 1:o + 3 * n + 1] = k.real
+            S[:, o + 3 * n + 1:o + 4 * n + 1] = k.imag
         par = np.concatenate([th0.real, th0.imag, d.real, d.imag, [gamma.real, gamma.imag]])
         act = np.arange(N)
         steps = 0
@@ -329,7 +376,7 @@ class _Tracker:
                                                        and deadline.expired()):
             fm = self._map(act.size)
             (out,) = fm(S[act].ravel(), par)
-            S[act] = out.reshape(act.size, 2 * n + 4)
+            S[act] = out.reshape(act.size, W)
             steps += CHUNK
             act = act[S[act, 2 * n + _ST] == 0]
         X = S[:, :n] + 1j * S[:, n:2 * n]
