@@ -789,15 +789,17 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     real = np.max(np.abs(Xf.imag) / sc, axis=1) < 1e-6
     out: list[KinResult] = []
     seen: list[np.ndarray] = []
+    ang = np.asarray(model.x_angle, dtype=bool)
     for x in Xf[real & ~singular].real:
         x1, _, nit, ok = newton(model, qa, x, tol, 8)
         if not ok:
             continue
         x1 = model.canonical_x(x1)
-        ang = np.asarray(model.x_angle, dtype=bool)
-        if any(np.max(np.where(ang, np.abs(np.mod(x1 - s + np.pi, 2 * np.pi) - np.pi),
-                               np.abs(x1 - s)) / sc) < 1e-6 for s in seen):
-            continue  # the same mode (angles compared modulo 2 pi: pi and -pi are one)
+        if seen:  # the same mode? (angles compared modulo 2 pi: pi and -pi are one)
+            dif = np.abs(np.asarray(seen) - x1)
+            dif[:, ang] = np.abs(np.mod(dif[:, ang] + np.pi, 2 * np.pi) - np.pi)
+            if np.min(np.max(dif / sc, axis=1)) < 1e-6:
+                continue
         seen.append(x1)
         stats = SolverStats("parameter-homotopy", start.time, time.perf_counter() - t_start,
                             nit, "converged", {"paths": start.root_count})
