@@ -185,3 +185,15 @@ def test_cusp_curves_of_the_cuspidal_3rpr(rpr):
             assert abs(rpr_det(x, y, phi)) < 1e-9 * 40**3
     assert max(ratios) < 1e-4
     assert all(10 <= p <= 30 for p in np.ravel(c.points))
+
+
+def test_is_cuspidal_stops_at_its_time_limit():
+    """The five-bar's joint space has 20 cusps and no mode change to find (52 s of loops):
+    the search stops at its time limit and says it proves nothing."""
+    import time
+
+    m = optkin.mechanisms.five_bar(9.0, 8.0, 5.0, 5.0, 8.0)
+    t0 = time.perf_counter()
+    res = is_cuspidal(m, time_limit=3.0)
+    assert time.perf_counter() - t0 < 20
+    assert res.cuspidal is None and "time limit" in res.message and "not a proof" in res.message

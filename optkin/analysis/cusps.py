@@ -322,7 +322,7 @@ def _positive_int(who, name, v):
 def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
                      radius: float | None = None, angles: int = 12, depth: int = 4,
                      bounds: Any = None, points: int = 240,
-                     curves: Any = None) -> ModeChangePath:
+                     curves: Any = None, time_limit: float = 120.0) -> ModeChangePath:
     """A joint-space loop from ``qa`` back to ``qa`` that takes assembly mode ``start`` to
     ``target`` without meeting a parallel singularity (see the module docstring).
 
@@ -349,6 +349,9 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
         Points per circle (the segments get a quarter of it).
     curves : SingularCurves, optional
         The section's singular curves, when already traced (with cusps).
+    time_limit : float
+        Seconds for the search (capped by the time budget); out of time it reports what it
+        tried, ``success=False``.
 
     Returns
     -------
@@ -357,10 +360,12 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
         the two modes (they lie in different aspects: no such path exists) or when no
         chain of loops joined them (the message lists what was tried).
     """
+    from ..limits import Deadline, time_budget
     from ..solvers.enumerate import assembly_modes
 
     t0 = time.perf_counter()
     who = "mode_change_path"
+    deadline = Deadline(min(float(time_limit), time_budget()))
     model = get_model(mech)
     qa = _check_qa_arg(model, qa, who)
     angles = _positive_int(who, "angles", angles)
@@ -399,11 +404,13 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
     prev: dict[int, Any] = {i0: None}
     tried = 0
     queue = deque([(i0, 0)])
-    while queue and i1 not in prev:
+    while queue and i1 not in prev and not deadline.expired():
         i, d = queue.popleft()
         if d >= depth:
             continue
         for ci in order:
+            if deadline.expired():
+                break
             for a0 in np.linspace(0, 2 * np.pi, angles, endpoint=False):
                 for orient in (1, -1):
                     P = _loop(qa, C[ci], free, rad, a0, orient, n_seg, n_circ)
@@ -424,7 +431,8 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
                        f"no chain of at most {depth} loops about the {len(C)} cusp(s) of "
                        f"the section took mode {i0} to mode {i1} ({tried} loops followed; "
                        f"modes reached: {sorted(prev)}); a larger radius or more angles "
-                       "may find one", tried, curves, t0)
+                       "may find one" + ("; stopped at the time limit" if deadline.expired()
+                                         else ""), tried, curves, t0)
     chain, pieces, k = [i1], [], i1
     while prev[k] is not None:
         i, ci, P, tr = prev[k]
@@ -458,7 +466,7 @@ class Cuspidality:
 
 
 def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = None,
-                bounds: Any = None, points: int = 8) -> Cuspidality:
+                bounds: Any = None, points: int = 8, time_limit: float = 120.0) -> Cuspidality:
     """Look for an assembly-mode change without a singularity near the cusps of joint-space
     sections; ``cuspidal=True`` comes with the path that proves it (``evidence``).
 
@@ -467,8 +475,12 @@ def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = No
     assembly mode at ``points`` points on a circle of ``radius`` about the cusp is followed
     once around that circle either way; one that comes back as another mode, det W_p of
     one sign all along, is the evidence. ``cuspidal`` is None when none did: not a proof
-    of the contrary (the message says what was tried).
+    of the contrary (the message says what was tried). ``time_limit`` (s, capped by the
+    time budget) stops the search; the message says so.
     """
+    from ..limits import Deadline, time_budget
+
+    deadline = Deadline(min(float(time_limit), time_budget()))
     from ..solvers.enumerate import assembly_modes
     from .continuation import _names_of, singular_curves
 
@@ -488,6 +500,8 @@ def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = No
     scale = np.asarray(model.x_scale, dtype=float)
     n_cusps = tried = 0
     for s in values:
+        if deadline.expired():
+            break
         fixed = {name: s} if name is not None else None
         curves = singular_curves(mech, plane="joint", fixed=fixed, bounds=bounds, cusps=True)
         C = np.asarray(curves.cusps, dtype=float).reshape(-1, len(curves.names))[:, :na]
@@ -497,6 +511,8 @@ def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = No
         free = [k for k in range(na) if not (na == 3 and k == 0)]
         section = {0: s} if na == 3 else {}
         for ci, c in enumerate(C):
+            if deadline.expired():
+                break
             for a0 in np.linspace(0, 2 * np.pi, points, endpoint=False):
                 q = c.copy()
                 q[free] = c[free] + rad * np.array([np.cos(a0), np.sin(a0)])
@@ -522,9 +538,10 @@ def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = No
                         return Cuspidality(True, f"cuspidal: {r.message}, at qa = "
                                            f"{np.round(q, 6).tolist()}", r, values, n_cusps,
                                            time.perf_counter() - t0)
+    late = "; stopped at the time limit" if deadline.expired() else ""
     return Cuspidality(None, f"no assembly-mode change found by {tried} loops about "
-                       f"{n_cusps} cusp(s) in {len(values)} section(s); not a proof that "
-                       "the mechanism is noncuspidal", None, values, n_cusps,
+                       f"{n_cusps} cusp(s) in {len(values)} section(s){late}; not a proof "
+                       "that the mechanism is noncuspidal", None, values, n_cusps,
                        time.perf_counter() - t0)
 
 
