@@ -216,7 +216,7 @@ class _Find:
 
 def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: int = 36,
               min_gap: float = 1e-3, modes: bool = True, tiny: float = 1e-5,
-              step: float = 0.25) -> Aspects3D:
+              step: float = 0.25, time_limit: float = 300.0) -> Aspects3D:
     """The generalized aspects of a 3-DoF planar platform in (x, y, phi), linked from
     exact sections at ``slices`` orientations (see the module docstring).
 
@@ -243,10 +243,17 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
         adapts to their turning). 0.25 by default: on the cuspidal 3-RPR the volumes
         then agree with a 240^3 grid to 4e-4, in half the time of the default 0.08.
 
+    time_limit : float
+        Seconds (capped by the time budget); past it no gap is refined any more and the
+        result says so (``success=False``, status ``"iteration_limit"``).
+
     Returns
     -------
     Aspects3D
     """
+    from ..limits import Deadline, time_budget
+
+    deadline = Deadline(min(float(time_limit), time_budget()))
     from .aspects import aspects
 
     t0 = time.perf_counter()
@@ -328,7 +335,7 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
         big_b = max((f[2].area for f in faces(wb)), default=0.0)
         large = any(faces(wa)[i][2].area > tiny * big_a for i in ua) or any(
             faces(wb)[j][2].area > tiny * big_b for j in ub)
-        if not large or b - a <= min_gap:
+        if not large or b - a <= min_gap or deadline.expired():
             done_gaps.append((a, b, pairs))
             continue
         mid = 0.5 * (a + b)
@@ -380,10 +387,13 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
     if modes:
         _count_modes(mech, model, out, faces, order)
     n = len(out)
+    late = deadline.expired()
     msg = (f"{n} aspect(s) of {mech.name} in (x, y, {angle}) from {len(order)} sections "
            f"({int(slices)} even, {len(order) - int(slices)} added where the sections' faces "
-           f"change); volumes {[round(a.volume, 6) for a in out]}")
-    return Aspects3D(mech.name, out, np.array(order), True, "optimal", msg,
+           f"change); volumes {[round(a.volume, 6) for a in out]}"
+           + ("; refinement stopped at the time limit: counts may be wrong" if late else ""))
+    return Aspects3D(mech.name, out, np.array(order), not late,
+                     "iteration_limit" if late else "optimal", msg,
                      time.perf_counter() - t0, (model.x_names[0], model.x_names[1], angle))
 
 
