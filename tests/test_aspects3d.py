@@ -90,6 +90,13 @@ def test_arguments_and_dispatch():
         aspects3d(m, slices=2)
     with pytest.raises(optkin.MechanismError, match="not a 3-DoF planar platform"):
         aspects3d(optkin.mechanisms.five_bar(9, 8, 5, 5, 8))
+    with pytest.raises(optkin.MechanismError, match="time_limit"):
+        aspects3d(m, time_limit=float("nan"))
+    with pytest.raises(optkin.MechanismError, match="min_gap"):
+        aspects3d(m, min_gap=0)
+    # a workspace still needs its section (aspects without one are 3-D)
+    with pytest.raises(optkin.MechanismError, match="phi"):
+        optkin.workspace(m)
     # the five-bar (2-DoF) keeps its planar aspects
     assert isinstance(optkin.aspects(optkin.mechanisms.five_bar(9, 8, 5, 5, 8)),
                       optkin.Aspects)

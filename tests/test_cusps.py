@@ -116,6 +116,13 @@ def test_bad_arguments(rpr):
         mode_change_path(rpr, [1.0, 2.0], 0, 1)
     with pytest.raises(optkin.MechanismError, match="depth must be a positive integer"):
         mode_change_path(rpr, QA, 1, 2, depth=0)
+    with pytest.raises(optkin.MechanismError, match="radius"):
+        mode_change_path(rpr, QA, 1, 2, radius=-1.0)
+    with pytest.raises(optkin.MechanismError, match="time_limit"):
+        is_cuspidal(rpr, time_limit=float("nan"))
+    refused = mode_change_path(rpr, QA, 0, 1)
+    with pytest.raises(optkin.MechanismError, match="no path"):
+        refused.plot()
     m = optkin.mechanisms.stewart_gough(DIET_A, DIET_B)
     with pytest.raises(optkin.MechanismError, match="needs 2 or 3 actuated joints"):
         mode_change_path(m, np.ones(6), 0, 1)

@@ -71,6 +71,34 @@ def test_compiled_tracker_follows_the_python_loop():
     np.testing.assert_allclose(fast.x, slow.x, atol=1e-12)
 
 
+def test_hermite_tracker_ends_where_the_rk4_loop_does():
+    """Above 4 unknowns the compiled tracker predicts by Hermite extrapolation; the numpy
+    loop of track() by RK4: along one gamma path both must end at the same 40 points."""
+    m = optkin.mechanisms.stewart_gough(DIET_A, DIET_B)
+    model = get_model(m)
+    sys = H._system(model)
+    tr = H._tracker(model)
+    if tr is None:
+        pytest.skip("no C compiler: only the Python loop exists here")
+    assert tr.predictor == "hermite"
+    S = H.load_or_build_start(model, seed=0)
+    target = np.concatenate([DIET_L, np.asarray(model.p)[sys.p_used],
+                             np.zeros(sys.n)]).astype(complex)
+    g = np.exp(0.7j)
+    fast = H.track(sys, S.solutions, S.theta, target, g, tracker=tr)
+    slow = H.track(sys, S.solutions, S.theta, target, g)
+    assert list(fast.status) == list(slow.status) == ["finite"] * 40
+    a, b = H._canonical(model, fast.x), H._canonical(model, slow.x)
+    assert np.max(np.abs(a - b)) < 1e-8  # path by path: no path jumped in either
+
+
+def test_time_limit_is_validated():
+    m = optkin.mechanisms.rpr3([[0, 0], [1, 0], [0.3, 0.9]], [[0, 0], [0.25, 0], [0.1, 0.2]])
+    for bad in (float("nan"), -1.0, 0.0):
+        with pytest.raises(optkin.MechanismError, match="time_limit"):
+            H.homotopy_modes(m, [0.6, 0.7, 0.65], time_limit=bad)
+
+
 def test_dietmaier_all_40_by_homotopy():
     m = optkin.mechanisms.stewart_gough(DIET_A, DIET_B)
     modes = optkin.assembly_modes(m, DIET_L, method="homotopy", certify=True)

@@ -420,7 +420,8 @@ def aspects(
         if chart is not None and chart.orientation and model.na == 3:
             from .aspects3d import aspects3d  # a turning 3-DoF platform, no section
 
-            return aspects3d(mech, limits=limits, bounds=bounds)  # type: ignore[return-value]
+            kw = {} if step is None else {"step": step}  # grid, qa_grid: planar only
+            return aspects3d(mech, limits=limits, bounds=bounds, **kw)  # type: ignore
     fixed, names, chart = _check_plane(mech, fixed)
     qa_grid = check_number("qa_grid", qa_grid, integer=True, low=2)
     lim_map = _limit_map(mech, names, limits)
@@ -596,13 +597,6 @@ def workspace(
     245.1
     """
     t0 = time.perf_counter()
-    if not fixed and isinstance(mech, Mechanism):
-        model = get_model(mech)
-        chart = planar_chart(model)
-        if chart is not None and chart.orientation and model.na == 3:
-            from .aspects3d import aspects3d  # a turning 3-DoF platform, no section
-
-            return aspects3d(mech, limits=limits, bounds=bounds)  # type: ignore[return-value]
     fixed, names, chart = _check_plane(mech, fixed)
     qa_grid = check_number("qa_grid", qa_grid, integer=True, low=2)
     lim_map = _limit_map(mech, names, limits)

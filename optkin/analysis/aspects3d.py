@@ -170,9 +170,8 @@ class _FreeTest:
         self.chart = planar_chart(model)
         topo = model.topology
         st = topo.st
-        Wp = ca.jacobian(topo.phi_sym, st.x)
-        f = ca.Function("detWp", [st.qa, st.x, st.p], [ca.det(Wp)])
-        self.det = topo.cached("aspects3d:det", lambda: f)
+        self.det = topo.cached("aspects3d:det", lambda: ca.Function(
+            "detWp", [st.qa, st.x, st.p], [ca.det(ca.jacobian(topo.phi_sym, st.x))]))
         names = list(mech.active_names)
         self.lim = [(names.index(k), float(v[0]), float(v[1]))
                     for k, v in dict(limits or {}).items()]
@@ -186,11 +185,8 @@ class _FreeTest:
         X[:, 0] = np.repeat(P[:, 0], len(ph))
         X[:, 1] = np.repeat(P[:, 1], len(ph))
         X[:, 2] = ((np.tile(ph, k) + np.pi) % (2 * np.pi)) - np.pi
-        ok = np.ones(len(X), dtype=bool)
-        V = None
-        for V_, valid in self.chart.full_points(X):
-            V, ok = V_, ok & valid
-            break
+        # one posture combination (checked in aspects3d): the legs' only inverse
+        V, ok = next(iter(self.chart.full_points(X)))
         qa = V[:, :self.model.na]
         for j, lo, hi in self.lim:
             ok &= (qa[:, j] >= lo) & (qa[:, j] <= hi)
@@ -252,8 +248,13 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
     Aspects3D
     """
     from ..limits import Deadline, time_budget
+    from .continuation import check_number
 
-    deadline = Deadline(min(float(time_limit), time_budget()))
+    min_gap = check_number("aspects3d: min_gap", min_gap, strict=True)
+    tiny = check_number("aspects3d: tiny", tiny)
+    step = check_number("aspects3d: step", step, strict=True)
+    deadline = Deadline(min(check_number("aspects3d: time_limit", time_limit, strict=True),
+                            time_budget()))
     from .aspects import aspects
 
     t0 = time.perf_counter()
@@ -264,6 +265,13 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
     if model.na != 3 or len(turn) != 1 or model.nx != 3:
         raise MechanismError(f"aspects3d: {mech.name} is not a 3-DoF planar platform "
                              "(three actuators; unknowns x, y and one orientation)")
+    from ..model.charts import planar_chart
+
+    chart = planar_chart(model)
+    if chart is None or chart.n_combos != 1:
+        raise MechanismError(f"aspects3d: {mech.name}'s legs have several postures (working "
+                             "modes); only legs with one inverse (3-RPR) are handled yet: "
+                             "use optkin.aspects(mech, fixed={...}) for sections")
     angle = turn[0]
     cache: dict[float, Any] = {}
 
@@ -326,8 +334,14 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
     work = [(phis[k], phis[k + 1] if k + 1 < len(phis) else phis[0] + 2 * np.pi)
             for k in range(len(phis))]
     done_gaps = []
+    late = False
     while work:
         a, b = work.pop()
+        if deadline.expired():  # out of time: the sections not yet traced stay untraced
+            late = True
+            if all(((q + np.pi) % (2 * np.pi)) - np.pi in cache for q in (a, b)):
+                done_gaps.append((a, b, links(a, b)[0]))
+            continue
         pairs, ua, ub = links(a, b)
         wa = ((a + np.pi) % (2 * np.pi)) - np.pi
         wb = ((b + np.pi) % (2 * np.pi)) - np.pi
@@ -335,7 +349,7 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
         big_b = max((f[2].area for f in faces(wb)), default=0.0)
         large = any(faces(wa)[i][2].area > tiny * big_a for i in ua) or any(
             faces(wb)[j][2].area > tiny * big_b for j in ub)
-        if not large or b - a <= min_gap or deadline.expired():
+        if not large or b - a <= min_gap:
             done_gaps.append((a, b, pairs))
             continue
         mid = 0.5 * (a + b)
@@ -380,14 +394,13 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
             span = [ph[(g + 1) % len(ph)], ph[g]]
         bbox = np.array([[pts[:, 0].min(), pts[:, 0].max()], [pts[:, 1].min(), pts[:, 1].max()],
                          span])
-        p_best, (wm, d, f_best, asp) = max(secs, key=lambda s: s[1][2].area)
+        _, (wm, d, _, asp) = max(secs, key=lambda s: s[1][2].area)
         out.append(Aspect3D(tuple(wm), int(d), vol, bbox, asp.v.copy(),
                             [(p, f) for p, (_, _, f, _) in secs]))
     out.sort(key=lambda a: -a.volume)
     if modes:
         _count_modes(mech, model, out, faces, order)
     n = len(out)
-    late = deadline.expired()
     msg = (f"{n} aspect(s) of {mech.name} in (x, y, {angle}) from {len(order)} sections "
            f"({int(slices)} even, {len(order) - int(slices)} added where the sections' faces "
            f"change); volumes {[round(a.volume, 6) for a in out]}"

@@ -37,6 +37,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
+from .continuation import check_number
 
 __all__ = ["ModeChangePath", "mode_change_path", "Cuspidality", "is_cuspidal", "CuspCurves",
            "cusp_curves"]
@@ -109,6 +110,8 @@ class ModeChangePath:
         from .aspects import _check_path, _save
 
         _check_path(path)
+        if not len(self.qa_path):
+            raise MechanismError("plot: this ModeChangePath has no path (success=False)")
         import matplotlib.pyplot as plt
 
         own = ax is None
@@ -142,8 +145,8 @@ class ModeChangePath:
             ins.set_xticks([])
             ins.set_yticks([])
             ax.indicate_inset_zoom(ins, edgecolor="0.4")
-        ax.set_title(title or f"mode change {self.modes[0]} -> {self.modes[-1]}"
-                     if self.modes else "no mode change found")
+        ax.set_title(title or (f"mode change {self.modes[0]} -> {self.modes[-1]}"
+                               if self.modes else "no mode change found"))
         ax.set_xlabel(self.curves.plane[0] if self.curves is not None else "")
         ax.set_ylabel(self.curves.plane[1] if self.curves is not None else "")
         if own and path is not None:
@@ -162,6 +165,8 @@ class ModeChangePath:
 
         if not self.success or not self.results:
             raise MechanismError("animate: this ModeChangePath has no path (success=False)")
+        fps = check_number("animate: fps", fps, strict=True)
+        frames = check_number("animate: frames", frames, integer=True, low=2)
         frames = max(2, min(int(frames), len(self.results)))
         idx = np.unique(np.linspace(0, len(self.results) - 1, frames).round().astype(int))
         draws = [_drawing(self.mechanism, self.results[k]) for k in idx]
@@ -248,7 +253,7 @@ def _resolve(modes, v: Any, what: str, scale) -> int:
     return j
 
 
-def _pieces_result(mech, model, qa, modes, i0, i1, signs, section, fixed, pieces, C, chain,
+def _pieces_result(mech, qa, modes, i0, i1, signs, section, fixed, pieces, C, chain,
                    tried, curves, t0) -> ModeChangePath:
     """The ModeChangePath of the loops ``pieces`` [(cusp index, qa path, track result)]."""
     path = np.vstack([p[1] if n == 0 else p[1][1:] for n, p in enumerate(pieces)])
@@ -269,9 +274,10 @@ def _pieces_result(mech, model, qa, modes, i0, i1, signs, section, fixed, pieces
         [r for n, p in enumerate(pieces) for r in list(p[2])[(0 if n == 0 else 1):]])
 
 
-def _failed(model, qa, modes, i0, i1, signs, section, msg, tried, curves, t0):
+def _failed(model, qa, modes, i0, i1, signs, section, msg, tried, curves, t0,
+            status: str = "infeasible"):
     na = model.na
-    return ModeChangePath(False, "infeasible", msg, qa, modes[i0].x.copy(),
+    return ModeChangePath(False, status, msg, qa, modes[i0].x.copy(),
                           modes[i1].x.copy(), np.zeros((0, na)), np.zeros((0, model.nx)),
                           np.zeros(0), float("nan"), np.zeros((0, na)), [], signs, section,
                           tried, time.perf_counter() - t0, curves)
@@ -289,6 +295,12 @@ def _section(mech, model, qa, bounds, curves=None):
     section = {0: float(qa[0])} if model.na == 3 else {}
     free = [k for k in range(model.na) if k not in section]
     return fixed, section, free, curves, C
+
+
+def _default_radius(curves) -> float:
+    """2 % of the section's extent: the loops' default radius about a cusp."""
+    b = np.asarray(curves.bounds, dtype=float)
+    return 0.02 * float(np.max(b[:, 1] - b[:, 0]))
 
 
 def _follow(mech, P, mode):
@@ -365,12 +377,17 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
 
     t0 = time.perf_counter()
     who = "mode_change_path"
-    deadline = Deadline(min(float(time_limit), time_budget()))
+    deadline = Deadline(min(check_number(f"{who}: time_limit", time_limit, strict=True),
+                            time_budget()))
+    if radius is not None:
+        radius = check_number(f"{who}: radius", radius, strict=True)
     model = get_model(mech)
     qa = _check_qa_arg(model, qa, who)
     angles = _positive_int(who, "angles", angles)
     depth = _positive_int(who, "depth", depth)
-    points = _positive_int(who, "points", points)
+    angles = _positive_int(who, "angles", angles)
+    if radius is not None:
+        radius = check_number(f"{who}: radius", radius, strict=True)
     modes = assembly_modes(mech, qa)
     if len(modes) < 2:
         raise MechanismError(f"{who}: qa has {len(modes)} assembly mode(s); a mode change "
@@ -394,10 +411,7 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
                        f"no cusp in the joint-space section {fixed or '(the joint space)'}: "
                        "no loop to try; this does not prove that no path exists", 0,
                        curves, t0)
-    b = np.asarray(curves.bounds, dtype=float)
-    rad = float(radius) if radius is not None else 0.02 * float(np.max(b[:, 1] - b[:, 0]))
-    if not np.isfinite(rad) or rad <= 0:
-        raise MechanismError(f"{who}: radius must be a positive number, got {radius!r}")
+    rad = radius if radius is not None else _default_radius(curves)
     n_circ = max(16, points)
     n_seg = max(8, n_circ // 4)
     order = np.argsort(np.linalg.norm(C[:, free] - qa[free], axis=1))  # nearest cusp first
@@ -413,6 +427,8 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
                 break
             for a0 in np.linspace(0, 2 * np.pi, angles, endpoint=False):
                 for orient in (1, -1):
+                    if deadline.expired():
+                        break
                     P = _loop(qa, C[ci], free, rad, a0, orient, n_seg, n_circ)
                     tried += 1
                     tr = _follow(mech, P, modes[i])
@@ -432,7 +448,8 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
                        f"the section took mode {i0} to mode {i1} ({tried} loops followed; "
                        f"modes reached: {sorted(prev)}); a larger radius or more angles "
                        "may find one" + ("; stopped at the time limit" if deadline.expired()
-                                         else ""), tried, curves, t0)
+                                         else ""), tried, curves, t0,
+                       "iteration_limit" if deadline.expired() else "infeasible")
     chain, pieces, k = [i1], [], i1
     while prev[k] is not None:
         i, ci, P, tr = prev[k]
@@ -441,7 +458,7 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
         k = i
     chain.reverse()
     pieces.reverse()
-    return _pieces_result(mech, model, qa, modes, i0, i1, signs, section, fixed, pieces, C,
+    return _pieces_result(mech, qa, modes, i0, i1, signs, section, fixed, pieces, C,
                           chain, tried, curves, t0)
 
 
@@ -466,35 +483,38 @@ class Cuspidality:
 
 
 def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = None,
-                bounds: Any = None, points: int = 8, time_limit: float = 120.0) -> Cuspidality:
+                bounds: Any = None, angles: int = 8, time_limit: float = 120.0) -> Cuspidality:
     """Look for an assembly-mode change without a singularity near the cusps of joint-space
     sections; ``cuspidal=True`` comes with the path that proves it (``evidence``).
 
     For each section value of the first actuated joint (3-DoF; ``sections``, default five
     values between 0.6 and 1.6 times the mechanism's size) and each cusp there, every
-    assembly mode at ``points`` points on a circle of ``radius`` about the cusp is followed
+    assembly mode at ``angles`` points on a circle of ``radius`` about the cusp is followed
     once around that circle either way; one that comes back as another mode, det W_p of
     one sign all along, is the evidence. ``cuspidal`` is None when none did: not a proof
     of the contrary (the message says what was tried). ``time_limit`` (s, capped by the
     time budget) stops the search; the message says so.
     """
     from ..limits import Deadline, time_budget
-
-    deadline = Deadline(min(float(time_limit), time_budget()))
     from ..solvers.enumerate import assembly_modes
     from .continuation import _names_of, singular_curves
 
     t0 = time.perf_counter()
     who = "is_cuspidal"
+    deadline = Deadline(min(check_number(f"{who}: time_limit", time_limit, strict=True),
+                            time_budget()))
     model = get_model(mech)
     na = model.na
     _check_qa_arg(model, np.zeros(na), who)
-    points = _positive_int(who, "points", points)
+    angles = _positive_int(who, "angles", angles)
+    if radius is not None:
+        radius = check_number(f"{who}: radius", radius, strict=True)
     if na == 3:
         name = _names_of(mech)[0]
         if sections is None:
             sections = np.linspace(0.6, 1.6, 5) * float(model.length)
-        values = [float(s) for s in np.atleast_1d(np.asarray(sections, dtype=float))]
+        values = [check_number(f"{who}: sections", v, low=-np.inf)
+                  for v in np.atleast_1d(np.asarray(sections, dtype=float))]
     else:
         name, values = None, [float("nan")]
     scale = np.asarray(model.x_scale, dtype=float)
@@ -506,14 +526,15 @@ def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = No
         curves = singular_curves(mech, plane="joint", fixed=fixed, bounds=bounds, cusps=True)
         C = np.asarray(curves.cusps, dtype=float).reshape(-1, len(curves.names))[:, :na]
         n_cusps += len(C)
-        b = np.asarray(curves.bounds, dtype=float)
-        rad = float(radius) if radius is not None else 0.02 * float(np.max(b[:, 1] - b[:, 0]))
+        rad = radius if radius is not None else _default_radius(curves)
         free = [k for k in range(na) if not (na == 3 and k == 0)]
         section = {0: s} if na == 3 else {}
         for ci, c in enumerate(C):
             if deadline.expired():
                 break
-            for a0 in np.linspace(0, 2 * np.pi, points, endpoint=False):
+            for a0 in np.linspace(0, 2 * np.pi, angles, endpoint=False):
+                if deadline.expired():
+                    break
                 q = c.copy()
                 q[free] = c[free] + rad * np.array([np.cos(a0), np.sin(a0)])
                 try:
@@ -523,16 +544,17 @@ def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = No
                 if len(modes) < 2:
                     continue
                 sg = [_det_sign(mech, m) for m in modes]
+                loops = [_loop(q, c, free, rad, a0, orient, 1, 240) for orient in (1, -1)]
                 for i in range(len(modes)):
-                    for orient in (1, -1):
-                        P = _loop(q, c, free, rad, a0, orient, 1, 240)[1:]
-                        P = np.vstack([q[None], P])
+                    for P in loops:
+                        if deadline.expired():
+                            break
                         tried += 1
                         tr = _follow(mech, P, modes[i])
                         j = None if tr is None else _which(modes, tr[-1].x, scale)
                         if j is None or j == i or sg[j] != sg[i]:
                             continue
-                        r = _pieces_result(mech, model, q, modes, i, j, (sg[i], sg[j]),
+                        r = _pieces_result(mech, q, modes, i, j, (sg[i], sg[j]),
                                            section, fixed or {}, [(ci, P, tr)], C, [i, j],
                                            tried, curves, t0)
                         return Cuspidality(True, f"cuspidal: {r.message}, at qa = "
@@ -615,7 +637,7 @@ class CuspCurves:
 
 
 def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: int = 40,
-                slope: float = 4.0) -> CuspCurves:
+                slope: float = 4.0, time_limit: float = 300.0) -> CuspCurves:
     """The cusp curves of a 3-DoF mechanism in its joint space: the cusps of the sections
     at ``slices`` values of the first actuated joint (over its stroke in ``limits``, else
     its range), each a corrected cusp of a traced singular curve, linked from section to
@@ -623,13 +645,18 @@ def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices:
     ``slope`` times the section step; one partner each).
 
     The links interpolate between sections; where cusps are born or die in pairs (a
-    swallowtail) between two sections a curve ends.
+    swallowtail) between two sections a curve ends. ``time_limit`` (s, capped by the time
+    budget): the sections not reached are left out and the result says so.
     """
+    from ..limits import Deadline, time_budget
     from .aspects import _limit_map
     from .continuation import _names_of, singular_curves
 
     t0 = time.perf_counter()
     who = "cusp_curves"
+    deadline = Deadline(min(check_number(f"{who}: time_limit", time_limit, strict=True),
+                            time_budget()))
+    slope = check_number(f"{who}: slope", slope, strict=True)
     model = get_model(mech)
     if model.na != 3:
         raise MechanismError(f"{who}: needs 3 actuated joints, {mech.name} has {model.na}")
@@ -649,7 +676,12 @@ def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices:
     gap = float(values[1] - values[0]) if len(values) > 1 else 1.0
     per: list[np.ndarray] = []
     failed = []
+    late = False
     for val in values:
+        if deadline.expired():
+            late = True
+            per.append(np.zeros((0, model.na + model.nx)))
+            continue
         c = singular_curves(mech, plane="joint", fixed={names[0]: float(val)}, bounds=bounds,
                             cusps=True)
         if not c.success:
@@ -669,7 +701,7 @@ def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices:
             if not len(V):
                 continue
             # distance in the other actuated joints, against the section step: a cusp
-            # curve rises at most 1 / slope per unit of them
+            # curve may move at most ``slope`` in them per unit of the sectioning joint
             d = np.linalg.norm((V - prev)[:, 1:model.na], axis=1) / gap
             for j in np.argsort(d):
                 if d[j] > slope:
@@ -686,10 +718,11 @@ def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices:
         open_ends = new_open
     vs = [np.array(c) for c in chains if len(c) >= 2]
     pts = np.vstack(per)[:, :model.na] if any(len(v) for v in per) else np.zeros((0, 3))
-    ok = not failed
+    ok = not failed and not late
     msg = (f"{len(vs)} cusp curve(s) through {len(pts)} cusps of {len(values)} sections "
            f"({names[0]} from {values[0]:.4g} to {values[-1]:.4g})"
-           + (f"; {len(failed)} section(s) incomplete: {failed[0]}" if failed else ""))
+           + (f"; {len(failed)} section(s) incomplete: {failed[0]}" if failed else "")
+           + ("; stopped at the time limit: later sections left out" if late else ""))
+    status = "optimal" if ok else "iteration_limit" if late else "inaccurate"
     return CuspCurves(mech.name, tuple(names[:model.na]), [v[:, :model.na] for v in vs], vs,
-                      pts, values, ok, "optimal" if ok else "inaccurate", msg,
-                      time.perf_counter() - t0)
+                      pts, values, ok, status, msg, time.perf_counter() - t0)

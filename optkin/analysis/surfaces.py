@@ -131,7 +131,7 @@ def _strip(A: np.ndarray, B: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> list
 
 def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
                       bounds: Any = None, slices: int = 72, step: float = 0.25,
-                      link: float = 0.6) -> SingularSurface:
+                      link: float = 0.6, time_limit: float = 300.0) -> SingularSurface:
     """The parallel singularity surface of a 3-DoF planar platform as a triangle mesh
     (see the module docstring).
 
@@ -152,13 +152,22 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
         Largest continuation step in each section (scaled units).
     link : float
         Largest mean distance between stitched curves, in mechanism sizes.
+    time_limit : float
+        Seconds (capped by the time budget); the sections not reached are left out and
+        the result says so (status ``"iteration_limit"``).
     """
+    from ..limits import Deadline, time_budget
     from .aspects import _limit_map
-    from .continuation import _names_of, singular_curves
+    from .continuation import _names_of, check_number, singular_curves
 
     t0 = time.perf_counter()
+    who = "singular_surfaces"
+    deadline = Deadline(min(check_number(f"{who}: time_limit", time_limit, strict=True),
+                            time_budget()))
+    step = check_number(f"{who}: step", step, strict=True)
+    link = check_number(f"{who}: link", link, strict=True)
     if space not in ("task", "joint"):
-        raise MechanismError(f"singular_surfaces: space must be 'task' or 'joint', got "
+        raise MechanismError(f"{who}: space must be 'task' or 'joint', got "
                              f"{space!r}")
     if not isinstance(slices, (int, np.integer)) or isinstance(slices, bool) or slices < 2:
         raise MechanismError(f"singular_surfaces: slices must be an integer >= 2, got "
@@ -183,16 +192,23 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
         else:
             from ..model.charts import planar_chart
 
-            lo, hi = planar_chart(model).actuator_range(0)
+            chart = planar_chart(model)
+            if chart is None:
+                raise MechanismError(f"{who}: give limits for {third} (its range is not known)")
+            lo, hi = chart.actuator_range(0)
         values = np.linspace(lo, hi, int(slices) + 2)[1:-1]
-        plane, cols = "joint", [0, 1, 2]
-        names = (names_all[0], names_all[1], names_all[2])
-        names = (names[1], names[2], names[0])  # the section plane, then the fixed joint
-        cols = [1, 2, 0]
+        # the section plane (the other two actuated joints), then the sectioning joint
+        plane, cols = "joint", [1, 2, 0]
+        names = (names_all[1], names_all[2], names_all[0])
     L = float(model.length)
     secs: list[list[tuple[np.ndarray, np.ndarray, bool, np.ndarray]]] = []
     failed = []
+    late = False
     for val in values:
+        if deadline.expired():
+            late = True
+            secs.append([])
+            continue
         c = singular_curves(mech, plane=plane, kind="parallel", fixed={third: float(val)},
                             bounds=bounds, step=step, cusps=False)
         if not c.success:
@@ -223,12 +239,11 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
             idx.append(np.arange(n, n + len(P)))
             n += len(P)
         index.append(idx)
-    scale = np.array([L, L, 1.0]) if space == "task" else np.array([L, L, L])
     tri: list[tuple] = []
     open_curves = 0
-    wrap = False  # the strip from phi = pi back to -pi would cross the picture
-    pairs = [(k, k + 1) for k in range(len(secs) - 1)] + ([(len(secs) - 1, 0)] if wrap else [])
-    for ka, kb in pairs:
+    # consecutive sections (not the last back to the first in phi: that strip would
+    # cross the picture from pi to -pi)
+    for ka, kb in [(k, k + 1) for k in range(len(secs) - 1)]:
         used = set()
         for ia, (A, _, ca_, _) in enumerate(secs[ka]):
             best, bj = np.inf, None
@@ -245,7 +260,7 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
             used.add(bj)
             B = secs[kb][bj][0]
             Ia, Ib = index[ka][ia], index[kb][bj]
-            a2, b2 = A[:, :2] / scale[:2], B[:, :2] / scale[:2]
+            a2, b2 = A[:, :2] / L, B[:, :2] / L
             if ca_:  # closed: start B at the point nearest A's start, run the same way
                 s0 = int(np.argmin(((b2 - a2[0]) ** 2).sum(1)))
                 order = np.roll(np.arange(len(B)), -s0)
@@ -266,11 +281,13 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
     Vf = np.vstack(full) if full else np.zeros((0, na + model.nx))
     R = np.concatenate(res) if res else np.zeros(0)
     T = np.array(tri, dtype=int).reshape(-1, 3)
-    ok = not failed and len(T) > 0
+    ok = not failed and not late and len(T) > 0
     msg = (f"{len(V)} vertices, {len(T)} triangles from {len(values)} sections in the "
            f"{space} space; max residual {R.max(initial=0.0):.1e}; {open_curves} curve(s) "
            "left open where the sections' topology changes"
-           + (f"; {len(failed)} section(s) incomplete: {failed[0][1]}" if failed else ""))
+           + (f"; {len(failed)} section(s) incomplete: {failed[0][1]}" if failed else "")
+           + ("; stopped at the time limit: later sections left out" if late else ""))
+    status = "optimal" if ok else "iteration_limit" if late else "inaccurate"
     return SingularSurface(mech.name, space, names, V, Vf, T, R, np.asarray(values),
-                           open_curves, ok, "optimal" if ok else "inaccurate", msg,
+                           open_curves, ok, status, msg,
                            time.perf_counter() - t0)

@@ -207,6 +207,11 @@ class Topology:
                     self._store[key] = v
         return v
 
+    def forget(self, key: Hashable) -> None:
+        """Drop what :meth:`cached` keeps under ``key`` (a result that must not be reused)."""
+        with self._lock:
+            self._store.pop(key, None)
+
     @property
     def compiled(self) -> bool:
         return "newton_step" in self.compiled_fns

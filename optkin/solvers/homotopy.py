@@ -198,7 +198,7 @@ class _Tracker:
     in one compiled call, mapped over the paths (the same arithmetic as :func:`track`, whose
     Python loop remains for when no compiler is available)."""
 
-    def __init__(self, sys: _System, tol: float = 1e-10, h0: float = 0.05, hmax: float = 0.25,
+    def __init__(self, sys: _System, h0: float = 0.05, hmax: float = 0.25,
                  hmin: float = 1e-12, big: float = 1e8, accept_tol: float = 1e-6,
                  grow: float = 1.25, sx: bool | None = None, newton: int = 3,
                  predictor: str | None = None) -> None:
@@ -423,7 +423,7 @@ NOISE = 1e-7
 
 
 def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
-          gamma: complex, tol: float = 1e-10, h0: float = 0.05, hmax: float = 0.25,
+          gamma: complex, h0: float = 0.05, hmax: float = 0.25,
           hmin: float = 1e-12, big: float = 1e8, max_steps: int = 5000,
           accept_tol: float = 1e-6, grow: float = 1.25,
           tracker: _Tracker | None = None, deadline: Any = None) -> _Paths:
@@ -743,6 +743,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     or the time budget (:func:`optkin.limits.time_budget`) when smaller. Out of time, the
     result says so (status ``"iteration_limit"``, ``complete`` False) and a start system
     cut short is neither stored nor reused."""
+    from ..analysis.continuation import check_number
     from ..limits import Deadline, time_budget
     from ..model import get_model
     from .common import check_mechanism, check_qa, make_result, newton
@@ -753,13 +754,14 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     t0 = time.perf_counter()
     sys = _system(model)
     tr = _tracker(model)
-    budget = time_budget() if time_limit is None else min(float(time_limit), time_budget())
+    budget = (time_budget() if time_limit is None else
+              min(check_number("time_limit", time_limit, strict=True), time_budget()))
     if start is None:
         key = ("homotopy:start", int(seed), structural(model))
         start = model.topology.cached(key, lambda: load_or_build_start(
             model, seed, Deadline(min(max(60.0, budget), time_budget()))))
         if start.stopped == "time":  # cut short: never reused
-            model.topology._store.pop(key, None)
+            model.topology.forget(key)
     deadline = Deadline(budget)
     t_start = time.perf_counter()
     target = np.concatenate([qa, np.asarray(model.p, dtype=float)[sys.p_used],
@@ -772,13 +774,13 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     while tries < TRIES:
         tries += 1
         gamma = np.exp(2j * np.pi * rng.uniform())
-        Q = track(sys, start.solutions, start.theta, target, gamma, tol=tol, tracker=tr,
+        Q = track(sys, start.solutions, start.theta, target, gamma, tracker=tr,
                   deadline=deadline)
         if P is None or np.sum(Q.status == "failed") < np.sum(P.status == "failed"):
             P = Q
         if not np.any(P.status == "failed") or deadline.expired():
             break
-    late = deadline.expired()
+    late = deadline.expired() and bool(np.any(P.status == "failed"))  # paths cut short
     sc = sys.scale
     fin = np.flatnonzero(P.status == "finite")
     Xf = _canonical(model, P.x[fin])
@@ -814,8 +816,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     account = EnumerationStats("homotopy", start.root_count, int(fin.size), n_inf,
                                int(singular.sum()), n_fail, start.root_count, complete)
     msg = (f"{len(out)} real assembly modes from {start.root_count} paths: {fin.size} "
-           f"finite ({int(singular.sum())} singular), {n_inf} at infinity"
-           + f", {n_fail} failed"
+           f"finite ({int(singular.sum())} singular), {n_inf} at infinity, {n_fail} failed"
            + (f", {jumped} path jumps" if jumped else "")
            + ("; every path accounted for" if complete else "; not every path accounted for")
            + (f"; the start system has {start.root_count} of the {bound} solutions the "
@@ -823,9 +824,8 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
            + ("; monodromy stopped at the time limit: the start system may be incomplete"
               if cut else "")
            + (f"; tracking stopped at the time limit of {budget:g} s" if late else ""))
-    status = ("iteration_limit" if (late or cut) and not complete else
-              "optimal" if out else "infeasible")
-    info = {"success": bool(out) and not late, "status": status,
+    status = "iteration_limit" if late or cut else "optimal" if out else "infeasible"
+    info = {"success": bool(out) and not (late or cut), "status": status,
             "message": msg, "complete": complete, "root_count": start.root_count,
             "monodromy_loops": start.loops, "start_time": start.time, "gamma_tries": tries,
             "monodromy_stopped": start.stopped,
