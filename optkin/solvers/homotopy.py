@@ -1,8 +1,7 @@
 """Every assembly mode by parameter homotopy, from start systems found by monodromy.
 
-A first, uncompiled version of the method of Sommese and Wampler (2005), ch. 7 and 18
-(parameter homotopies, the gamma trick) and Duff et al. (2019, monodromy), for the closure
-of any square model:
+The method of Sommese and Wampler (2005), ch. 7 and 18 (parameter homotopies, the gamma
+trick) and Duff et al. (2019, monodromy), for the closure of any square model:
 
 * the system. The closure rows ``sqrt(u) - v`` of distance legs become ``u - v^2`` (the
   same real solutions, no branch cut); with the actuated values q_a, the geometry p and an
@@ -21,7 +20,8 @@ of any square model:
 * the parameter homotopy. From theta_0 to the target (q_a, p, 0) along
   theta_0 + s(t) (theta_1 - theta_0), s(t) = gamma t / (1 + (gamma - 1) t) with a random
   complex gamma (which keeps the path away from the discriminant with probability one),
-  every path is tracked by an RK4 predictor and a Newton corrector with adaptive steps
+  every path is tracked by a predictor (RK4, or Hermite extrapolation above ``SMALL``
+  unknowns) and a Newton corrector with adaptive steps
   (linear solves equilibrated: columns by the size of the point, rows to unit norm);
   a path that grows beyond 1e8 (scaled) near the target (t >= 0.99) goes to infinity;
   one that does so earlier, or whose step falls below 1e-12, fails, and then every path is
