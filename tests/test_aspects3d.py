@@ -94,6 +94,9 @@ def test_arguments_and_dispatch():
         aspects3d(m, time_limit=float("nan"))
     with pytest.raises(optkin.MechanismError, match="min_gap"):
         aspects3d(m, min_gap=0)
+    # junk for fixed is refused as before, not taken for "no section" (a fuzz finding)
+    with pytest.raises(optkin.MechanismError):
+        optkin.aspects(optkin.mechanisms.five_bar(9, 8, 5, 5, 8), fixed=np.full(0, np.nan))
     # a workspace still needs its section (aspects without one are 3-D)
     with pytest.raises(optkin.MechanismError, match="phi"):
         optkin.workspace(m)

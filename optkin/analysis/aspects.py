@@ -414,7 +414,7 @@ def aspects(
     [2, 3, 3, 2]
     """
     t0 = time.perf_counter()
-    if not fixed and isinstance(mech, Mechanism):
+    if fixed is None and isinstance(mech, Mechanism):
         model = get_model(mech)
         chart = planar_chart(model)
         if chart is not None and chart.orientation and model.na == 3:
