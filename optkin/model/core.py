@@ -103,22 +103,23 @@ def _select_rows(st: Structure, p: np.ndarray, mech: Mechanism, samples: int = 4
     phi = st.phi
     if phi.shape[0] == 0:
         return []
-    v = ca.vertcat(st.qa, st.x)
-    f = st.cache.get("rows")
-    if f is None:  # once per structure: every geometry of it is checked with this Function
-        f = st.cache["rows"] = ca.Function("rows", [v, st.p], [phi, ca.jacobian(phi, v)])
+    key = ("rows", samples)
+    f = st.cache.get(key)
+    if f is None:  # once per structure: every geometry of it is checked with this Function,
+        # all samples in one call (the rows and their Jacobians side by side)
+        v = ca.vertcat(st.qa, st.x)
+        one = ca.Function("rows", [v, st.p], [phi, ca.jacobian(phi, v)])
+        f = st.cache[key] = (one.map("rows_map", "serial", samples, [1], []), v.shape[0])
+    fm, n = f
     rng = np.random.default_rng(seed)
-    n = v.shape[0]
     L = float(p[-1])
     is_len = np.concatenate([np.zeros(st.qa.shape[0], bool), st.x_length])
-    vals, jacs = [], []
-    for _ in range(samples):
-        z = rng.uniform(-np.pi, np.pi, n)
-        z = np.where(is_len, z * L / np.pi, z)
-        out = f(z, p)
-        vals.append(np.array(out[0]).ravel())
-        jacs.append(np.array(out[1]))
-    G = np.hstack(jacs)
+    Z = rng.uniform(-np.pi, np.pi, (samples, n))  # the same draws as one row at a time
+    Z = np.where(is_len[None, :], Z * L / np.pi, Z)
+    out = fm(Z.T, p)
+    V = np.array(out[0])  # (m, samples)
+    G = np.array(out[1])  # (m, n * samples): the samples' Jacobians side by side
+    vals = [V[:, k] for k in range(samples)]
     if not np.all(np.isfinite(G)):
         raise MechanismError("the closure rows are not finite at random configurations; "
                              "check the geometry", path=())
