@@ -93,7 +93,8 @@ class EnumerationStats:
     Attributes
     ----------
     method : str
-        ``"multistart"``: Newton from low-discrepancy starts (:func:`optkin.assembly_modes`).
+        ``"multistart"``: Newton from low-discrepancy starts (:func:`optkin.assembly_modes`);
+        ``"homotopy"``: parameter homotopy paths (``method="homotopy"``).
     paths : int
         Starts (or homotopy paths) run to the end.
     finite : int
@@ -108,7 +109,9 @@ class EnumerationStats:
         The known bound on the number of solutions (None: unknown).
     complete : bool
         True only when every solution is accounted for: for ``"multistart"``, when the
-        number of isolated solutions found equals the known bound and no continuum was met.
+        number of isolated solutions found equals the known bound and no continuum was met;
+        for ``"homotopy"``, when every path ended (none failed or jumped) and the start
+        system is not known to be short.
     """
 
     method: str

@@ -725,6 +725,20 @@ def _fig(nr, nc, w=4.0, h=4.0):
     return fig, axs
 
 
+def _axes(ax, figsize, three_d: bool = False):
+    """(figure, axes, whether they are new): ``ax`` itself when given, else a new figure
+    of ``figsize`` with one (3-D) axes."""
+    if ax is not None:
+        return ax.figure, ax, False
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=figsize)
+    return fig, fig.add_subplot(projection="3d" if three_d else None), True
+
+
 def _face_patch(f: Face, **kw):
     from matplotlib.patches import PathPatch
     from matplotlib.path import Path

@@ -117,13 +117,10 @@ class Aspects3D:
 
     def plot(self, path: str | None = None, every: int = 3, title: str | None = None) -> Any:
         """The aspects as stacks of section outlines in (x, y, phi), one colour each."""
-        from .aspects import _check_path, _save
+        from .aspects import _axes, _check_path, _save
 
         _check_path(path)
-        import matplotlib.pyplot as plt
-
-        fig = plt.figure(figsize=(7.5, 6.5))
-        ax = fig.add_subplot(projection="3d")
+        fig, ax, _ = _axes(None, (7.5, 6.5), three_d=True)
         for k, a in enumerate(self.aspects):
             color = f"C{k % 10}"
             label = (f"aspect {k + 1}: det {'+' if a.det_sign > 0 else '-'}, "

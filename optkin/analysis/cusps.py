@@ -107,18 +107,12 @@ class ModeChangePath:
 
     def plot(self, path: str | None = None, ax: Any = None, title: str | None = None) -> Any:
         """The path in the joint-space section over its singular curves and cusps."""
-        from .aspects import _check_path, _save
+        from .aspects import _axes, _check_path, _save
 
         _check_path(path)
         if not len(self.qa_path):
             raise MechanismError("plot: this ModeChangePath has no path (success=False)")
-        import matplotlib.pyplot as plt
-
-        own = ax is None
-        if own:
-            fig, ax = plt.subplots(figsize=(6, 6))
-        else:
-            fig = ax.figure
+        fig, ax, own = _axes(ax, (6, 6))
         if self.curves is not None:
             self.curves.plot(ax=ax)
         k = [i for i in range(self.qa_path.shape[1]) if self.section.get(i) is None]
@@ -609,17 +603,10 @@ class CuspCurves:
 
     def plot(self, path: str | None = None, ax: Any = None, title: str | None = None) -> Any:
         """The cusp curves in the joint space (3-D axes; ``ax`` may be a 3-D Axes)."""
-        from .aspects import _check_path, _save
+        from .aspects import _axes, _check_path, _save
 
         _check_path(path)
-        import matplotlib.pyplot as plt
-
-        own = ax is None
-        if own:
-            fig = plt.figure(figsize=(7, 6))
-            ax = fig.add_subplot(projection="3d")
-        else:
-            fig = ax.figure
+        fig, ax, own = _axes(ax, (7, 6), three_d=True)
         for k, c in enumerate(self.curves):
             ax.plot(c[:, 1], c[:, 2], c[:, 0], "-", color="tab:purple", lw=2,
                     label="cusp curves" if k == 0 else None)

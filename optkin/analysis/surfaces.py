@@ -86,17 +86,10 @@ class SingularSurface:
     def plot(self, path: str | None = None, ax: Any = None, title: str | None = None,
              color: Any = None) -> Any:
         """The surface (matplotlib ``plot_trisurf``), coloured by the third coordinate."""
-        from .aspects import _check_path, _save
+        from .aspects import _axes, _check_path, _save
 
         _check_path(path)
-        import matplotlib.pyplot as plt
-
-        own = ax is None
-        if own:
-            fig = plt.figure(figsize=(7.5, 6.5))
-            ax = fig.add_subplot(projection="3d")
-        else:
-            fig = ax.figure
+        fig, ax, own = _axes(ax, (7.5, 6.5), three_d=True)
         V, T = self.vertices, self.triangles
         if len(T):
             kw = {"color": color} if color is not None else {"cmap": "viridis"}

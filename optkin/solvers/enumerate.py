@@ -887,13 +887,9 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         modes = homotopy_modes(mech, qa, seed=int(seed), tol=o["tol"],
                                time_limit=o["time_limit"])
         if o["certify"] and len(modes):
-            from .certify import certify_point, mark_overlaps
+            from .certify import stamp
 
-            certs = mark_overlaps([certify_point(model, qa, kr.x) for kr in modes])
-            for kr, c in zip(modes, certs):
-                kr.certified = c.certified
-                kr.stats.extra["certificate"] = c.message
-            modes.info["certified"] = sum(c.certified for c in certs)
+            modes.info["certified"] = stamp(model, qa, modes)
         return modes
     t_start = timer()
     tol = o["tol"]
@@ -1127,13 +1123,9 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         out, hits_sorted, comps = _continua(model, qa, out, hits_sorted, starts, tol, dedup)
     dimension = max((c.dimension for c in comps), default=0)
     if o["certify"] and out:
-        from .certify import certify_point, mark_overlaps
+        from .certify import stamp
 
-        certs = mark_overlaps([certify_point(model, qa, kr.x) for kr in out])
-        for kr, c in zip(out, certs):
-            kr.certified = c.certified
-            kr.stats.extra["certificate"] = c.message
-        info["certified"] = sum(c.certified for c in certs)
+        info["certified"] = stamp(model, qa, out)
     gt = _good_turing(hits_sorted, draws(converged, done))
     # more isolated modes than the bound: some are not what the bound counts (points of a
     # continuum that looked isolated, or duplicates); never called complete
