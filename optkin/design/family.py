@@ -106,6 +106,12 @@ class Family:
             piv = int(cand[-1])
             pivots.append(piv)
             self._eq.append((piv, coef, val))
+        for e, (piv, coef, _) in enumerate(self._eq):
+            later = {q for q, _, _ in self._eq[e + 1:]}
+            bad = [self.names[i] for i in np.flatnonzero(coef) if i != piv and i in later]
+            if bad:
+                raise MechanismError(f"equal[{e}]: it names {bad}, which a later equality "
+                                     "fixes; put that equality first")
         self.free_index = np.array([i for i in range(len(self.names)) if i not in pivots],
                                    dtype=int)
         self.free = tuple(self.names[i] for i in self.free_index)
@@ -133,6 +139,13 @@ class Family:
         out.update({k: float(x) for k, x in zip(self.names, v)})
         return out
 
+    def full_affine(self) -> tuple[np.ndarray, np.ndarray]:
+        """(A, b) with every variable's value A z + b (the equalities are linear)."""
+        k = len(self.free)
+        b = self.full(np.zeros(k))
+        A = np.stack([self.full(np.eye(k)[i]) - b for i in range(k)], axis=1)
+        return A, b
+
     def bound_violation(self, z: Any) -> np.ndarray:
         """max(0, lo - v, v - hi) over the eliminated variables (0 when within bounds)."""
         v = self.full(z)
@@ -144,6 +157,23 @@ class Family:
     def centre(self) -> np.ndarray:
         return 0.5 * (self.lower + self.upper)
 
+    def _reference(self) -> np.ndarray:
+        """A design within every bound (eliminated variables too): the centre of the free
+        box if it is, else the first such point of a Sobol sequence."""
+        z = self.centre()
+        if self.bound_violation(z) <= 0:
+            return z
+        from scipy.stats import qmc
+
+        pts = self.lower + qmc.Sobol(len(z), seed=0).random(1024) * (self.upper - self.lower)
+        ok = pts[self.bound_violation(pts) <= 0]
+        if not len(ok):
+            raise MechanismError(f"no design within the bounds satisfies the equalities "
+                                 f"({', '.join(self.names)}); widen the bounds")
+        # the feasible point nearest the centre of the feasible ones
+        c = ok.mean(axis=0)
+        return ok[np.argmin(np.linalg.norm(ok - c, axis=1))]
+
     # -------------------------------------------------------------- geometry
     def _p(self, z: np.ndarray) -> np.ndarray:
         m = self.mechanism(z)
@@ -154,7 +184,7 @@ class Family:
 
     def _check_family(self) -> None:
         """The topology at the centre; p affine in z (p0, M) if it is."""
-        z0 = self.centre()
+        z0 = self._reference()
         try:
             m0 = self.mechanism(z0)
         except Exception as e:  # the builder's own message says what is wrong
@@ -168,18 +198,24 @@ class Family:
         span = self.upper - self.lower
         for i in range(k):
             h = np.zeros(k)
-            h[i] = 0.25 * span[i]
+            h[i] = 1e-3 * span[i]
             M[:, i] = (self._p(z0 + h) - self._p(z0 - h)) / (2 * h[i])
         rng = np.random.default_rng(12345)
         affine = True
-        for _ in range(2):
+        tried = 0
+        for _ in range(50):
             z = self.lower + rng.random(k) * span
+            if self.bound_violation(z) > 0:
+                continue
             try:
                 p = self._p(z)
             except Exception:
                 continue
+            tried += 1
             if np.max(np.abs(p - (p0 + M @ (z - z0)))) > 1e-9 * (1 + np.max(np.abs(p))):
                 affine = False
+            if tried == 2:
+                break
         self.affine = affine
         self.z0, self.p0, self.M = z0, p0 - M @ z0, M
 

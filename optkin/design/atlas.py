@@ -1,0 +1,162 @@
+"""Performance atlases: measures over a grid of designs, as contour maps.
+
+``atlas(family, variables, measures, n=...)`` evaluates each measure at every design of a
+grid over two free design variables (the others fixed or given by equalities, as in
+:class:`~optkin.design.Family`): measures over fixed nodes (GCI, least conditioning,
+dimensions) as one mapped call of the compiled evaluation for every design and node; the
+others design by design. Designs outside the bounds of an eliminated variable (the
+trapezoid of Liu, Wang and Pritschow's normalised design space r1 + r2 + r3 = 3) are NaN.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._checks import as_int, show
+from ..errors import MechanismError
+from ..results import _jsonable
+from .family import Family
+from .problem import Measure
+
+__all__ = ["Atlas", "atlas"]
+
+
+@dataclass
+class Atlas:
+    """Measures over a grid of designs.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The two free variables spanning the grid.
+    axes : tuple of ndarray
+        Their grid values.
+    values : dict name -> ndarray (n1, n0)
+        Each measure on the grid (rows: the second variable), NaN outside the design space.
+    dims : dict name -> ndarray (n1, n0)
+        Every dimension on the grid.
+    """
+
+    names: tuple[str, str]
+    axes: tuple[np.ndarray, np.ndarray]
+    values: dict[str, np.ndarray]
+    dims: dict[str, np.ndarray] = field(default_factory=dict)
+    time: float = 0.0
+    success: bool = True
+    status: str = "optimal"
+    message: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return _jsonable({"names": self.names, "axes": self.axes, "values": self.values,
+                          "time": self.time, "success": self.success,
+                          "status": self.status, "message": self.message})
+
+    def best(self, measure: str, maximize: bool = True) -> dict[str, float]:
+        """The grid design with the largest (or smallest) value of ``measure``."""
+        v = self.values[measure]
+        k = np.nanargmax(v) if maximize else np.nanargmin(v)
+        i, j = np.unravel_index(k, v.shape)
+        out = {n: float(d[i, j]) for n, d in self.dims.items()}
+        out[measure] = float(v[i, j])
+        return out
+
+    def plot(self, path: str | None = None, measures: Sequence[str] | None = None,
+             levels: int = 12) -> Any:
+        """Contour maps of the measures over the design grid, labelled, one panel each."""
+        import matplotlib.pyplot as plt
+
+        from ..analysis.aspects import _save
+
+        names = list(measures or self.values)
+        for m in names:
+            if m not in self.values:
+                raise MechanismError(f"plot: {show(m)} is not a measure of this atlas; known: "
+                                     f"{', '.join(self.values)}")
+        n = len(names)
+        fig, axs = plt.subplots(1, n, figsize=(4.6 * n, 4.0), dpi=150, squeeze=False)
+        X, Y = np.meshgrid(*self.axes)
+        for ax, m in zip(axs[0], names):
+            V = self.values[m]
+            if np.isfinite(V).any():
+                cs = ax.contourf(X, Y, V, levels=levels, cmap="viridis")
+                cl = ax.contour(X, Y, V, levels=cs.levels, colors="k", linewidths=0.4)
+                ax.clabel(cl, fmt="%.3g", fontsize=7)
+                fig.colorbar(cs, ax=ax, label=m)
+            ax.set_xlabel(self.names[0])
+            ax.set_ylabel(self.names[1])
+            ax.set_title(m)
+            ax.set_aspect("equal", adjustable="box")
+        fig.tight_layout()
+        if path is not None:
+            _save(fig, path)
+        return fig
+
+
+def atlas(family: Callable[..., Any] | Family, variables: Mapping[str, Any] | None = None,
+          measures: Mapping[str, Measure] | Sequence[Measure] = (), *, n: int | Sequence[int]
+          = 50, fixed: Mapping[str, Any] | None = None,
+          equal: Sequence[tuple[Mapping[str, float], float]] = ()) -> Atlas:
+    """Evaluate measures over an n x n grid of two free design variables.
+
+    Parameters
+    ----------
+    family, variables, fixed, equal :
+        As for :func:`optkin.design.optimize` (exactly two free variables).
+    measures : mapping name -> Measure, or sequence of Measure
+    n : int or (n0, n1)
+        Grid points per variable (between the bounds, ends excluded by half a cell).
+
+    Returns
+    -------
+    Atlas
+
+    Examples
+    --------
+    >>> import optkin
+    >>> from optkin import design
+    >>> five = lambda a, b: optkin.mechanisms.five_bar(1.0, a, b, b, a)
+    >>> at = design.atlas(five, {"a": (0.6, 1.4), "b": (0.6, 1.4)},
+    ...                   {"GCI": design.GCI(design.Disc((0.5, 1.0), 0.2), (1, -1))}, n=8)
+    >>> at.values["GCI"].shape
+    (8, 8)
+    """
+    import time
+
+    from .optimize import _family
+
+    t0 = time.perf_counter()
+    fam = _family(family, variables, fixed, equal)
+    if len(fam.free) != 2:
+        raise MechanismError(f"atlas: the grid spans exactly two free variables; this family "
+                             f"has {list(fam.free)} (fix or tie the others)")
+    if not isinstance(measures, Mapping):
+        measures = {repr(m): m for m in measures}
+    if not measures:
+        raise MechanismError("measures: give at least one measure")
+    for k, m in measures.items():
+        if not isinstance(m, Measure):
+            raise MechanismError(f"measures[{k!r}]: expected an optkin.design measure, got "
+                                 f"{show(m)}")
+    nn = (n, n) if np.isscalar(n) else tuple(n)
+    if len(nn) != 2:
+        raise MechanismError(f"n: expected an int or a pair, got {show(n)}")
+    n0, n1 = (as_int(v, "n", lo=2, hi=2000) for v in nn)
+    ax0 = fam.lower[0] + (np.arange(n0) + 0.5) / n0 * (fam.upper[0] - fam.lower[0])
+    ax1 = fam.lower[1] + (np.arange(n1) + 0.5) / n1 * (fam.upper[1] - fam.lower[1])
+    X, Y = np.meshgrid(ax0, ax1)
+    Z = np.stack([X.ravel(), Y.ravel()], -1)
+    inside = fam.bound_violation(Z) <= 0
+    values = {}
+    for k, m in measures.items():
+        v = np.full(len(Z), np.nan)
+        if inside.any():
+            v[inside] = m.values(fam, Z[inside])
+        values[k] = v.reshape(X.shape)
+    full = fam.full(Z)
+    dims = {name: full[:, i].reshape(X.shape) for i, name in enumerate(fam.names)}
+    return Atlas(names=(fam.free[0], fam.free[1]), axes=(ax0, ax1), values=values, dims=dims,
+                 time=time.perf_counter() - t0)
