@@ -422,13 +422,14 @@ def optimize(family: Callable[..., Any] | Family, variables: Mapping[str, Any] |
         if min(z[i] - fam.lower[i], fam.upper[i] - z[i]) <= 1e-9 * (fam.upper[i] - fam.lower[i]):
             active.append(f"{name} at a bound")
     ok = viol <= 1e-6 and all(v["ok"] for v in verification.values())
-    if not ok and status == "optimal":
+    if viol > 1e-6:
         status = "infeasible"
         message = ("no design found satisfies every constraint (violation "
-                   f"{viol:.3g}); the returned design is the least violating")
+                   f"{viol:.3g}); the returned design is the least violating"
+                   + (f" ({message})" if message else ""))
+    elif not ok:
         bad = [k for k, v in verification.items() if not v["ok"]]
-        if bad and viol <= 1e-6:
-            message = f"the denser verification fails for {bad}"
+        status, message = "inaccurate", f"the denser verification fails for {bad}"
     return DesignResult(dimensions=fam.dims(z), z=z, value=value, measures=measures,
                         active=active, verification=verification, evaluations=ctr.n,
                         history=ctr.history, method=used, mechanism=fam.mechanism(z),

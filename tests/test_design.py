@@ -1,0 +1,316 @@
+"""Design measures and optimization (optkin.design) against independent evidence.
+
+The planar 5R of Liu, Wang and Pritschow is written here again in numpy (base joints at
+(-r3, 0) and (r3, 0), proximal links r1, distal links r2; optkin's five_bar has its first
+base joint at the origin, so optkin's x is this file's x + r3): its inverse with both
+elbows outward (optkin's working mode (1, -1)), the Jacobians A P' = B theta' from
+(P - C_i).(P' - C_i') = 0, det A and kappa by numpy's SVD. Closed forms are derived in the
+docstrings of the tests that use them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import optkin
+from optkin import design
+from optkin.errors import MechanismError
+
+OUT = (1, -1)   # optkin's working mode with both elbows outward (Liu's "+-")
+
+
+def liu(r1, r2, r3):
+    """Liu's symmetric 5R as an optkin mechanism (optkin frame: base at 0 and 2 r3)."""
+    return optkin.mechanisms.five_bar(2 * r3, r1, r2, r2, r1)
+
+
+def five_r(P, r1, r2, r3):
+    """Independent 5R model in Liu's frame at points P (N, 2): reachable, det A, 1/kappa,
+    with both elbows outward."""
+    P = np.asarray(P, dtype=float)
+    reach = np.ones(len(P), dtype=bool)
+    rows, cols = [], []
+    for A, side in ((np.array([-r3, 0.0]), +1), (np.array([r3, 0.0]), -1)):
+        v = P - A
+        d = np.hypot(v[:, 0], v[:, 1])
+        reach &= (d <= r1 + r2) & (d >= abs(r1 - r2))
+        cosa = np.clip((r1 ** 2 + d ** 2 - r2 ** 2) / (2 * r1 * np.maximum(d, 1e-300)), -1, 1)
+        th = np.arctan2(v[:, 1], v[:, 0]) + side * np.arccos(cosa)
+        C = A + r1 * np.stack([np.cos(th), np.sin(th)], -1)
+        perp = r1 * np.stack([-np.sin(th), np.cos(th)], -1)
+        rows.append(P - C)
+        cols.append(np.sum((P - C) * perp, axis=1))
+    Am = np.stack(rows, 1)                       # (N, 2, 2): rows (P - C_i)
+    Bm = np.zeros_like(Am)
+    Bm[:, 0, 0], Bm[:, 1, 1] = cols
+    det = np.linalg.det(Am)
+    with np.errstate(all="ignore"):
+        J = np.linalg.solve(Am, Bm)
+        s = np.linalg.svd(J, compute_uv=False)
+        ik = s[:, -1] / s[:, 0]
+    return reach, det, np.where(reach, ik, np.nan)
+
+
+def lens(a, b, d):
+    """Area of the intersection of discs of radii a and b at distance d."""
+    if d >= a + b:
+        return 0.0
+    if d <= abs(a - b):
+        return np.pi * min(a, b) ** 2
+    t1 = np.arccos((d * d + a * a - b * b) / (2 * d * a))
+    t2 = np.arccos((d * d + b * b - a * a) / (2 * d * b))
+    return a * a * (t1 - np.sin(2 * t1) / 2) + b * b * (t2 - np.sin(2 * t2) / 2)
+
+
+def two_annulus(r1, r2, r3):
+    """Area of the intersection of the annuli |r1 - r2| <= |P - A_i| <= r1 + r2 (inclusion
+    and exclusion over the four disc intersections)."""
+    a, b, d = abs(r1 - r2), r1 + r2, 2 * r3
+    return lens(b, b, d) - 2 * lens(a, b, d) + lens(a, a, d)
+
+
+def mic_on_axis(r1, r2, r3):
+    """Largest circle centred on the symmetry axis inside the upper half (y >= 0) of the
+    two annuli (the parallel singular curve aside): with d = |centre - A_i| = sqrt(r3^2 +
+    y^2), R(y) = min(r1 + r2 - d, d - |r1 - r2|, y); the decreasing term meets the smaller
+    increasing one at y* = max(y1, y2) with y1 = ((r1 + r2)^2 - r3^2) / (2 (r1 + r2))
+    (r1 + r2 - d = y) and y2 = sqrt(max(r1, r2)^2 - r3^2) (d = max(r1, r2)) when real."""
+    b = r1 + r2
+    y1 = (b * b - r3 * r3) / (2 * b)
+    m = max(r1, r2)
+    y = max(y1, np.sqrt(m * m - r3 * r3)) if m > r3 else y1
+    d = np.hypot(r3, y)
+    return b - d, y
+
+
+# ------------------------------------------------------------------ point measures
+def test_conditioning_and_singular_values_match_the_numpy_5r():
+    r1, r2, r3 = 1.1, 1.4, 0.5
+    m = liu(r1, r2, r3)
+    rng = np.random.default_rng(3)
+    P = np.stack([rng.uniform(-2, 2, 400), rng.uniform(-0.5, 2.4, 400)], -1)
+    reach, det, ik = five_r(P, r1, r2, r3)
+    got = design.conditioning(m, P + [r3, 0], mode=OUT)
+    assert np.array_equal(np.isfinite(got), reach)
+    assert np.max(np.abs(got[reach] - ik[reach])) < 1e-9
+    sv = design.singular_values(m, P[reach][:20] + [r3, 0], mode=OUT)
+    assert np.allclose(sv[:, 1] / sv[:, 0], ik[reach][:20], atol=1e-9)
+
+
+def test_three_rpr_conditioning_matches_the_leg_directions():
+    """3-RPR: q_a' = J^-1 (x', y', phi') with rows (u_i, (R b_i) x u_i) (u_i the unit leg
+    direction), the angle column scaled by 1/length."""
+    base = np.array([[0, 0], [1.2, 0], [0.4, 1.0]])
+    plat = np.array([[-0.2, -0.1], [0.25, -0.15], [0.0, 0.2]])
+    m = optkin.mechanisms.rpr3(base, plat)
+    rng = np.random.default_rng(0)
+    T = np.stack([rng.uniform(0.3, 0.8, 50), rng.uniform(0.2, 0.6, 50)], -1)
+    phi, L = 0.3, 0.7
+    R = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
+    want = []
+    for t in T:
+        rows = []
+        for b, p in zip(base, plat):
+            Rb = R @ p
+            u = (t + Rb - b) / np.linalg.norm(t + Rb - b)
+            rows.append([u[0], u[1], (Rb[0] * u[1] - Rb[1] * u[0]) / L])
+        s = np.linalg.svd(np.array(rows), compute_uv=False)
+        want.append(s[-1] / s[0])
+    got = design.conditioning(m, T, fixed={"phi": phi}, length=L)
+    assert np.max(np.abs(got - want)) < 1e-9
+
+
+def test_gci_over_a_disc_matches_a_midpoint_quadrature():
+    r1, r2, r3 = 1.0, 1.5, 0.5
+    m = liu(r1, r2, r3)
+    disc = design.Disc((r3, 1.3), 0.45)
+    got = design.gci(m, disc, mode=OUT)
+    h = 0.0015
+    g = np.arange(-0.45 + h / 2, 0.45, h)
+    X, Y = np.meshgrid(g, g)
+    inside = X ** 2 + Y ** 2 <= 0.45 ** 2
+    P = np.stack([X[inside], Y[inside] + 1.3], -1)
+    reach, _, ik = five_r(P, r1, r2, r3)
+    assert reach.all() and got.reachable == 1.0
+    assert abs(got.value - ik.mean()) < 2e-4
+
+
+# ------------------------------------------------------------------ Liu, Wang and Pritschow
+LIU_DESIGNS = [(0.8, 1.6, 0.6), (1.0, 1.5, 0.5), (0.7, 1.9, 0.4), (0.6, 1.4, 1.0)]
+
+
+def _brute_mic(r1, r2, r3, h=0.004):
+    """Largest disc centred on the axis, in the upper half, free of unreachable points and of
+    points where det A differs in sign from the centre's: distances to a dense cloud of bad
+    points (accurate to about h)."""
+    xs = np.arange(-3.2, 3.2, h)
+    ys = np.arange(-0.1, 3.2, h)
+    X, Y = np.meshgrid(xs, ys)
+    P = np.stack([X.ravel(), Y.ravel()], -1)
+    reach, det, _ = five_r(P, r1, r2, r3)
+    best = (0.0, None)
+    for s in (1.0, -1.0):
+        bad = ~reach | (np.sign(det) != s) | (P[:, 1] < 0)
+        tree = cKDTree(P[bad])
+        yc = np.arange(0.0, 3.0, h / 2)
+        C = np.stack([np.zeros_like(yc), yc], -1)
+        rc, dc, _ = five_r(C, r1, r2, r3)
+        ok = rc & (np.sign(dc) == s)
+        if not ok.any():
+            continue
+        dist, _ = tree.query(C[ok])
+        k = int(np.argmax(dist))
+        if dist[k] > best[0]:
+            best = (float(dist[k]), float(C[ok][k, 1]))
+    return best
+
+
+@pytest.mark.parametrize("r", LIU_DESIGNS[:2])
+def test_liu_largest_inscribed_circle_on_the_axis(r):
+    r1, r2, r3 = r
+    got = design.largest_inscribed(liu(r1, r2, r3), OUT, line=((r3, 0), (0, 1), (0, r1 + r2)),
+                                   bounds=[[r3 - 3.5, r3 + 3.5], [0, 3.5]])
+    closed, yc = mic_on_axis(r1, r2, r3)
+    brute, yb = _brute_mic(r1, r2, r3)
+    assert got.success and abs(got.size - brute) < 0.006
+    assert abs(got.centre[0] - r3) < 1e-12
+    # where the circles bind (the parallel curve farther than the closed form's radius),
+    # the closed form to 1e-6
+    if brute > closed - 0.004:
+        assert abs(got.size - closed) < 1e-6
+        assert abs(got.centre[1] - yc) < 1e-4
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("r", LIU_DESIGNS[2:])
+def test_liu_largest_inscribed_circle_on_the_axis_more(r):
+    test_liu_largest_inscribed_circle_on_the_axis(r)
+
+
+def test_liu_usable_workspace_area_is_the_exact_two_annulus_half():
+    """With both elbows outward and r2 > r1 the whole upper half of the two annuli lies in
+    one aspect (checked here on a dense sample): the usable workspace (that aspect cut at
+    y >= 0) has half the two-annulus area, computed exactly above."""
+    for r1, r2, r3 in LIU_DESIGNS[:2]:
+        h = 0.005
+        X, Y = np.meshgrid(np.arange(-3, 3, h), np.arange(h / 2, 3, h))
+        P = np.stack([X.ravel(), Y.ravel()], -1)
+        reach, det, _ = five_r(P, r1, r2, r3)
+        assert len(np.unique(np.sign(det[reach]))) == 1
+        seed = (r3, mic_on_axis(r1, r2, r3)[1])
+        got = design.area(liu(r1, r2, r3), design.Aspect(seed, bounds=[[r3 - 3, r3 + 3],
+                                                                       [0, 3]]), mode=OUT)
+        want = two_annulus(r1, r2, r3) / 2
+        assert got.success and abs(got.value / want - 1) < 1e-6, (got.value, want)
+
+
+def test_liu_gci_of_the_usable_workspace_matches_an_independent_quadrature():
+    """optkin integrates 1/kappa over the aspect with weights (Gosselin and Angeles' GCI,
+    Liu's Eq. 4), not the unweighted polar-grid mean the paper printed; here the same
+    integral by the midpoint rule on a 0.002 grid."""
+    r1, r2, r3 = 0.8, 1.6, 0.6
+    seed = (r3, mic_on_axis(r1, r2, r3)[1])
+    got = design.gci(liu(r1, r2, r3), design.Aspect(seed, bounds=[[r3 - 3, r3 + 3], [0, 3]]),
+                     mode=OUT)
+    h = 0.002
+    X, Y = np.meshgrid(np.arange(-3 + h / 2, 3, h), np.arange(h / 2, 3, h))
+    P = np.stack([X.ravel(), Y.ravel()], -1)
+    reach, _, ik = five_r(P, r1, r2, r3)
+    want = np.nanmean(ik[reach])
+    assert got.success and abs(got.value - want) < 1e-3, (got.value, want)
+    assert abs(got.area - reach.sum() * h * h) < 0.01
+
+
+# ------------------------------------------------------------------ families
+def test_family_eliminates_equalities_and_finds_affine_geometry():
+    fam = design.Family(liu, {"r1": (0.1, 2.9), "r2": (0.1, 2.9), "r3": (0.1, 2.9)},
+                        equal=[({"r1": 1, "r2": 1, "r3": 1}, 3.0)])
+    assert fam.free == ("r1", "r2") and fam.affine
+    d = fam.dims([1.0, 1.2])
+    assert abs(d["r3"] - 0.8) < 1e-15
+    assert fam.bound_violation([2.0, 1.5]) > 0        # r3 = -0.5 < 0.1
+    p0, M, D = fam.geometry(np.array([[1.0, 1.2]]))
+    p = p0 + M @ D[0]
+    assert np.allclose(p[:-1], liu(1.0, 1.2, 0.8).geometry, atol=1e-12)
+    nonaff = design.Family(lambda a: optkin.mechanisms.five_bar(1.0, np.exp(a), 1, 1, 1),
+                           {"a": (-0.5, 0.5)})
+    assert not nonaff.affine
+
+
+def test_family_errors_name_the_offending_item():
+    with pytest.raises(MechanismError, match=r"variables\['a'\]: lo < hi"):
+        design.Family(liu, {"a": (1, 0)})
+    with pytest.raises(MechanismError, match="'r9' is not a design variable"):
+        design.Family(liu, {"r1": (0.5, 1), "r2": (0.5, 1), "r3": (0.5, 1)},
+                      equal=[({"r9": 1}, 1.0)])
+    with pytest.raises(MechanismError, match="building the centre design"):
+        design.Family(liu, {"r1": (-1.0, -0.5), "r2": (0.5, 1), "r3": (0.5, 1)})
+    m = liu(1, 1.5, 0.5)
+    with pytest.raises(MechanismError, match="give the working mode"):
+        design.conditioning(m, [[0.5, 1.0]])
+    with pytest.raises(MechanismError, match="not a working mode"):
+        design.conditioning(m, [[0.5, 1.0]], mode=(1, 2))
+    with pytest.raises(MechanismError, match="needs the orientation fixed"):
+        design.conditioning(optkin.mechanisms.rpr3([[0, 0], [1, 0], [0, 1]],
+                                                   [[0, 0], [0.2, 0], [0, 0.2]]), [[0.3, 0.3]])
+
+
+# ------------------------------------------------------------------ atlases and optimization
+def test_atlas_values_equal_the_measure_per_design():
+    at = design.atlas(liu, {"r1": (0.3, 2.7), "r2": (0.3, 2.7), "r3": (0.1, 2.9)},
+                      {"GCI": design.GCI(lambda d: design.Disc((d["r3"], 0.6), 0.15), OUT)},
+                      equal=[({"r1": 1, "r2": 1, "r3": 1}, 3.0)], n=12)
+    V = at.values["GCI"]
+    assert V.shape == (12, 12)
+    assert np.isnan(V[-1, -1]) and np.isfinite(V[0, 0])     # r3 < 0.1 outside the space
+    for i, j in [(0, 0), (3, 5), (7, 2)]:
+        r1, r2, r3 = at.dims["r1"][i, j], at.dims["r2"][i, j], at.dims["r3"][i, j]
+        g = design.Disc((r3, 0.6), 0.15).nodes(12)
+        reach, _, ik = five_r(g[0] - [r3, 0], r1, r2, r3)
+        want = np.dot(np.where(reach, np.nan_to_num(ik), 0.0), g[1]) / g[1].sum()
+        assert abs(V[i, j] - want) < 1e-9
+    fig = at.plot()
+    assert fig.axes[0].get_xlabel() == "r1"
+
+
+def test_optimize_beats_a_grid_and_keeps_the_disc_well_conditioned():
+    """Maximise the GCI of a 5R over a disc with r1 + r2 <= 2.6, 1/kappa >= 0.3 on the disc:
+    the optimum beats every design of a 15 x 15 grid evaluated with the numpy model, and
+    the disc is checked singularity-free and well conditioned on 20 000 points."""
+    disc = design.Disc((0.5, 1.4), 0.3)
+    five = lambda a, b: optkin.mechanisms.five_bar(1.0, a, b, b, a)   # noqa: E731
+    res = design.optimize(five, {"a": (0.5, 1.8), "b": (0.5, 1.8)},
+                          design.Maximize(design.GCI(disc, OUT)),
+                          [design.Dimension({"a": 1, "b": 1}) <= 2.6,
+                           design.MinConditioning(disc, OUT) >= 0.3], maxiter=30)
+    assert res.success, res.message
+    a, b = res.dimensions["a"], res.dimensions["b"]
+    assert a + b <= 2.6 + 1e-6
+    P, W = disc.nodes(12)
+    rng = np.random.default_rng(1)
+    rr, tt = 0.3 * np.sqrt(rng.random(20000)), 2 * np.pi * rng.random(20000)
+    Q = np.stack([0.5 + rr * np.cos(tt), 1.4 + rr * np.sin(tt)], -1)
+    reach, det, ik = five_r(Q - [0.5, 0], a, b, 0.5)
+    assert reach.all() and len(np.unique(np.sign(det))) == 1 and ik.min() >= 0.3 - 1e-6
+    best_grid = -1.0
+    for ga in np.linspace(0.5, 1.8, 15):
+        for gb in np.linspace(0.5, 1.8, 15):
+            if ga + gb > 2.6:
+                continue
+            reach, det, ik = five_r(P - [0.5, 0], ga, gb, 0.5)
+            r2_, d2_, ik2 = five_r(Q[:4000] - [0.5, 0], ga, gb, 0.5)
+            if not (r2_.all() and len(np.unique(np.sign(d2_))) == 1 and ik2.min() >= 0.3):
+                continue
+            best_grid = max(best_grid, float(np.dot(ik, W) / W.sum()))
+    assert best_grid > 0 and res.value >= best_grid - 1e-9
+    assert res.history and res.evaluations > 0
+
+
+def test_optimize_reports_infeasible_problems():
+    five = lambda a, b: optkin.mechanisms.five_bar(1.0, a, b, b, a)   # noqa: E731
+    res = design.optimize(five, {"a": (0.5, 1.0), "b": (0.5, 1.0)},
+                          design.Maximize(design.Dimension("a")),
+                          [design.Dimension({"a": 1, "b": 1}) >= 5.0], maxiter=5)
+    assert not res.success and res.status == "infeasible" and "least violating" in res.message
