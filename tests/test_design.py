@@ -314,3 +314,65 @@ def test_optimize_reports_infeasible_problems():
                           design.Maximize(design.Dimension("a")),
                           [design.Dimension({"a": 1, "b": 1}) >= 5.0], maxiter=5)
     assert not res.success and res.status == "infeasible" and "least violating" in res.message
+
+
+# ------------------------------------------------------------------ Le, Kang and Doan
+def lkd(rho):
+    """Le, Kang and Doan's 5R: proximal links 1, distal links rho, base joints at +-l0 with
+    l0 = (sqrt 2 / 2)(rho - 1)."""
+    l0 = np.sqrt(2) / 2 * (rho - 1)
+    return optkin.mechanisms.five_bar(2 * l0, 1.0, rho, rho, 1.0)
+
+
+def _square_ok(rho, centre_y, half, n=241):
+    """Every point of the square (Liu's frame: centred on the axis) reachable with both
+    elbows outward, det A of one sign and 1/kappa >= 0.5 (the numpy model)."""
+    l0 = np.sqrt(2) / 2 * (rho - 1)
+    g = np.linspace(-half, half, n)
+    X, Y = np.meshgrid(g, g + centre_y)
+    reach, det, ik = five_r(np.stack([X.ravel(), Y.ravel()], -1), 1.0, rho, l0)
+    return bool(reach.all() and len(np.unique(np.sign(det))) == 1 and ik.min() >= 0.5 - 1e-9)
+
+
+def _brute_square(rho, h=0.004):
+    """Largest feasible square centred on the axis: L-infinity distances from centres on the
+    axis to a dense cloud of infeasible points (about h accurate)."""
+    l0 = np.sqrt(2) / 2 * (rho - 1)
+    xs = np.arange(-3.5, 3.5, h)
+    X, Y = np.meshgrid(xs, np.arange(-1.0, 3.5, h))
+    P = np.stack([X.ravel(), Y.ravel()], -1)
+    reach, det, ik = five_r(P, 1.0, rho, l0)
+    C = np.stack([np.zeros(400), np.linspace(0.5, 2.8, 400)], -1)
+    rc, dc, ic = five_r(C, 1.0, rho, l0)
+    best = 0.0
+    for s in (1.0, -1.0):
+        bad = ~reach | (np.sign(det) != s) | ~(ik >= 0.5)
+        ok = rc & (np.sign(dc) == s) & (ic >= 0.5)
+        if ok.any():
+            d, _ = cKDTree(P[bad]).query(C[ok], p=np.inf)
+            best = max(best, float(d.max()))
+    return 2 * best
+
+
+def test_le_kang_doan_square_beats_the_published_design():
+    """The largest square centred on the symmetry axis with 1/kappa >= 0.5, both elbows
+    outward, over rho = l2 / l1 (l1 = 1, l0 = (sqrt 2 / 2)(l2 - l1)). The published optimum
+    rho = 1.9721 has a square of side 1.3134 here (printed: 1.3142); optimize finds a
+    larger one, checked on a 241 x 241 grid of its square."""
+    meas = design.LargestInscribed(OUT, shape="square", gamma=0.5,
+                                   line=lambda d: ((np.sqrt(2) / 2 * (d["rho"] - 1), 0), (0, 1),
+                                                   (0, 1 + d["rho"])))
+    res = design.optimize(lkd, {"rho": (1.2, 3.0)}, design.Maximize(meas), maxiter=4,
+                          popsize=5)
+    assert res.success, res.message
+    rho = res.dimensions["rho"]
+    side = 2 * res.value
+    published = _brute_square(1.9721)
+    assert abs(published - 1.3134) < 0.01
+    assert side >= published
+    exact = res.details["objective"]
+    assert exact.shape == "square" and abs(exact.size - res.value) < 1e-15
+    l0 = np.sqrt(2) / 2 * (rho - 1)
+    assert abs(exact.centre[0] - l0) < 1e-12
+    assert _square_ok(rho, exact.centre[1], exact.size)
+    assert not _square_ok(rho, exact.centre[1], exact.size * 1.01)

@@ -209,7 +209,7 @@ class Probe:
             parts = [o["reach"].min(axis=1)]
             kinds = [REACH]
             if s0 is not None:
-                parts.append(s0 * o["raw_det"] / self.det_scale)
+                parts.append(np.asarray(s0) * o["raw_det"] / self.det_scale)
                 kinds.append(PARALLEL)
             if self.limits:
                 qa = o["qa"]
@@ -403,7 +403,13 @@ def _section(pr: Probe, s0: float | None, lo: np.ndarray, hi: np.ndarray, points
     if n == 0:
         return lo, hi
     rows = np.arange(n)
-    F = pr.margin(points(np.concatenate([lo, hi]), np.concatenate([rows, rows])), s0)[0]
+    sv = None if s0 is None else np.broadcast_to(np.asarray(s0, dtype=float), (n,))
+
+    def S(r: np.ndarray) -> Any:
+        return None if sv is None else sv[r]
+
+    F = pr.margin(points(np.concatenate([lo, hi]), np.concatenate([rows, rows])),
+                  S(np.concatenate([rows, rows])))[0]
     flo, fhi = F[:n].copy(), F[n:].copy()
     flo = np.where(flo > 0, flo, np.nan)      # a feasible end with F <= 0 cannot happen
     fhi = np.minimum(fhi, 0.0)
@@ -417,7 +423,7 @@ def _section(pr: Probe, s0: float | None, lo: np.ndarray, hi: np.ndarray, points
             t = fa / (fa - fb)          # regula falsi, as a fraction from a towards b
         t = np.where(np.isfinite(t) & (it % 3 != 2), np.clip(t, 0.01, 0.99), 0.5)
         x = a + t * (b - a)
-        fx = pr.margin(points(x, act), s0)[0]
+        fx = pr.margin(points(x, act), S(act))[0]
         good = fx > 0
         # Illinois: halve the retained end's value when the same end moves twice
         lo[act] = np.where(good, x, a)
@@ -508,52 +514,65 @@ def _union(arr: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def _hidden(pr: Probe, s0: float | None, V: np.ndarray, F: np.ndarray, want: int,
-            points: Any, iters: int = 40) -> list[tuple[int, int, float]]:
+def _hidden(pr: Probe, s0: Any, V: np.ndarray, F: np.ndarray, want: int,
+            points: Any, iters: int = 48, before: np.ndarray | None = None
+            ) -> list[tuple[int, int, float]]:
     """Where the margin F sampled along rows (parameters V (R, S)) may change sign twice
     between samples: at each interior local maximum of g = want * F with g <= 0 at it and
     both neighbours, that could reach 0 (g + 3 x the larger neighbour difference > 0), the
-    maximum of g over the two neighbouring cells by golden-section search. Returns
-    (row, sample index, parameter) where g > 0 was found: a feasible point between
-    infeasible samples (want = +1), or the reverse (want = -1)."""
+    maximum of g over the two neighbouring cells by golden-section search, a candidate
+    dropped once it cannot reach 0 (its best value plus 4 x the sampled slope times the
+    bracket stays negative). Returns (row, sample index, parameter) where g > 0 was
+    found: a feasible point between infeasible samples (want = +1), or the reverse
+    (want = -1). ``before``: per row, only samples before this index."""
     g = want * F
     if g.shape[1] < 3:
         return []
+    s0v = None if s0 is None else np.broadcast_to(np.asarray(s0, dtype=float), (g.shape[0],))
+
+    def S(r: np.ndarray) -> Any:
+        return None if s0v is None else s0v[r]
+
     c, l_, r_ = g[:, 1:-1], g[:, :-2], g[:, 2:]
     cand = (c <= 0) & (l_ <= 0) & (r_ <= 0) & (c >= l_) & (c > r_) & \
         (c + 3 * np.maximum(c - l_, c - r_) > 0) & np.isfinite(c)
+    if before is not None:
+        cand &= np.arange(1, g.shape[1] - 1)[None] < np.asarray(before)[:, None] - 1
     R, I = np.nonzero(cand)
     if not len(R):
         return []
     I = I + 1
     a, b = V[R, I - 1].astype(float), V[R, I + 1].astype(float)
+    slope = 4 * np.maximum(np.abs(c[R, I - 1] - l_[R, I - 1]),
+                           np.abs(c[R, I - 1] - r_[R, I - 1])) / np.maximum(b - a, 1e-300)
     phi = (np.sqrt(5) - 1) / 2
     x1, x2 = b - phi * (b - a), a + phi * (b - a)
-    g1 = want * pr.margin(points(x1, R), s0)[0]
-    g2 = want * pr.margin(points(x2, R), s0)[0]
+    g12 = want * pr.margin(points(np.concatenate([x1, x2]), np.concatenate([R, R])),
+                           S(np.concatenate([R, R])))[0]
+    g1, g2 = g12[:len(R)], g12[len(R):]
     found = np.zeros(len(R), dtype=bool)
     best = np.where(g1 > g2, x1, x2)
+    act = np.arange(len(R))
     for _ in range(iters):
-        found |= (g1 > 0) | (g2 > 0)
-        best = np.where(found & ~((g1 > 0) | (g2 > 0)), best, np.where(g1 > g2, x1, x2))
-        if found.all():
+        hit = (g1[act] > 0) | (g2[act] > 0)
+        found[act[hit]] = True
+        best[act[hit]] = np.where(g1[act[hit]] > g2[act[hit]], x1[act[hit]], x2[act[hit]])
+        gm = np.maximum(g1[act], g2[act])
+        hope = gm + slope[act] * (b[act] - a[act]) > 0
+        act = act[~hit & hope]
+        if not len(act):
             break
-        left = g1 > g2
-        b = np.where(left, x2, b)
-        a = np.where(left, a, x1)
-        x2n = np.where(left, x1, a + phi * (b - a))
-        x1n = np.where(left, b - phi * (b - a), x2)
-        g2n = np.where(left, g1, np.nan)
-        g1n = np.where(left, np.nan, g2)
-        need1, need2 = np.isnan(g1n), np.isnan(g2n)
-        xq = np.concatenate([x1n[need1], x2n[need2]])
-        rq = np.concatenate([R[need1], R[need2]])
-        gq = want * pr.margin(points(xq, rq), s0)[0] if len(xq) else np.zeros(0)
-        g1n[need1] = gq[:need1.sum()]
-        g2n[need2] = gq[need1.sum():]
-        x1, x2, g1, g2 = x1n, x2n, g1n, g2n
-    found |= (g1 > 0) | (g2 > 0)
-    best = np.where((g1 > 0) | (g2 > 0), np.where(g1 > g2, x1, x2), best)
+        left = g1[act] > g2[act]
+        A, B = a[act], b[act]
+        B = np.where(left, x2[act], B)
+        A = np.where(left, A, x1[act])
+        x2n = np.where(left, x1[act], A + phi * (B - A))
+        x1n = np.where(left, B - phi * (B - A), x2[act])
+        xq = np.where(left, x1n, x2n)
+        gq = want * pr.margin(points(xq, R[act]), S(R[act]))[0]
+        g1n = np.where(left, gq, g2[act])
+        g2n = np.where(left, g1[act], gq)
+        a[act], b[act], x1[act], x2[act], g1[act], g2[act] = A, B, x1n, x2n, g1n, g2n
     return [(int(R[k]), int(I[k]), float(best[k])) for k in np.flatnonzero(found)]
 
 
@@ -802,15 +821,18 @@ def _unit(shape: str, th: np.ndarray) -> np.ndarray:
     return u
 
 
-def _exits(pr: Probe, c: np.ndarray, s0: float, U: np.ndarray, rmax: float, steps: int,
+def _exits(pr: Probe, c: np.ndarray, s0: Any, U: np.ndarray, rmax: float, steps: int,
            tol: float) -> tuple[np.ndarray, np.ndarray]:
     """First exit distance along each ray c + t U_k (t in (0, rmax]) and the reason code
     just past it (rmax and 0 when the ray stays inside): marching, a search for thin
-    infeasible parts between the steps (:func:`_hidden`), then the boundary to ``tol``."""
+    infeasible parts between the steps (:func:`_hidden`), then the boundary to ``tol``.
+    ``c`` and ``s0`` (the det A sign kept) may be one per ray."""
     K = len(U)
+    C = np.broadcast_to(np.asarray(c, dtype=float), (K, 2))
+    sv = np.broadcast_to(np.asarray(s0, dtype=float), (K,))
     t = rmax * np.arange(1, steps + 1) / steps
-    P = (c[None, None] + t[None, :, None] * U[:, None, :]).reshape(-1, 2)
-    F, _, _ = pr.margin(P, s0)
+    P = (C[:, None] + t[None, :, None] * U[:, None, :]).reshape(-1, 2)
+    F, _, _ = pr.margin(P, np.repeat(sv, steps))
     F = F.reshape(K, steps)
     bad = F <= 0
     first = np.where(bad.any(1), bad.argmax(1), steps)
@@ -818,20 +840,40 @@ def _exits(pr: Probe, c: np.ndarray, s0: float, U: np.ndarray, rmax: float, step
     lo = np.where(first > 0, t[np.maximum(first - 1, 0)], 0.0)
     Fz = np.hstack([np.full((K, 1), 1.0), F])        # t = 0: the centre, feasible
     Tz = np.broadcast_to(np.concatenate([[0.0], t]), Fz.shape)
-    for r, i, x in _hidden(pr, s0, Tz, Fz, -1, lambda v, rows: c[None] + v[:, None] * U[rows]):
+    for r, i, x in _hidden(pr, sv, Tz, Fz, -1, lambda v, rows: C[rows] + v[:, None] * U[rows],
+                           before=first + 1):
         if x < hi[r]:
             hi[r], lo[r] = x, Tz[r, i - 1]
     out = np.full(K, rmax)
     why = np.zeros(K, dtype=int)
     idx = np.flatnonzero(np.isfinite(hi))
     if len(idx):
-        Ui = U[idx]
-        a, b = _section(pr, s0, lo[idx], hi[idx],
-                        lambda v, rows: c[None] + v[:, None] * Ui[rows], tol)
-        cm, _ = pr.reasons(c[None] + b[:, None] * Ui, s0)
+        Ui, Ci = U[idx], C[idx]
+        a, b = _section(pr, sv[idx], lo[idx], hi[idx],
+                        lambda v, rows: Ci[rows] + v[:, None] * Ui[rows], tol)
+        cm, _ = pr.reasons(Ci + b[:, None] * Ui, sv[idx])
         out[idx] = a
         why[idx] = cm
     return out, why
+
+
+def _coarse(pr: Probe, C: np.ndarray, shape: str, rays: int, steps: int,
+            tol: float = 1e-9) -> np.ndarray:
+    """The unrefined size (least exit over ``rays`` rays) of the shape at each centre of C
+    (n, 2), all centres in one batch (0 where a centre is infeasible)."""
+    code, o = pr.reasons(C)
+    ok = (code == 0) & np.isfinite(o["det"]) & (o["det"] != 0)
+    out = np.zeros(len(C))
+    if not ok.any():
+        return out
+    Cs, s0 = C[ok], np.sign(o["det"][ok])
+    th = 2 * np.pi * np.arange(rays) / rays
+    U = _unit(shape, th)
+    n = len(Cs)
+    h, _ = _exits(pr, np.repeat(Cs, rays, axis=0), np.repeat(s0, rays), np.tile(U, (n, 1)),
+                  2.0 * pr.scale, steps, tol * pr.scale)
+    out[ok] = h.reshape(n, rays).min(axis=1)
+    return out
 
 
 def _inscribed_at(pr: Probe, c: np.ndarray, shape: str, rays: int, steps: int,
@@ -869,7 +911,11 @@ def _inscribed_at(pr: Probe, c: np.ndarray, shape: str, rays: int, steps: int,
             if hh[kk, j[kk]] < best_h:
                 best_h, best_th = float(hh[kk, j[kk]]), float(centre_th[kk])
                 best_why = int(ww.reshape(len(local), 9)[kk, j[kk]])
-            if half.max() < 1e-10:
+            # done when no bracket can still go below the best by more than 1e-12 of the
+            # size (the exits across each bracket differ by less than that)
+            spread = hh.max(1) - hh.min(1)
+            if half.max() < 1e-10 or np.all((spread < 1e-12 * pr.scale)
+                                            | (hh.min(1) > best_h + spread)):
                 break
     contact = c + best_h * _unit(shape, np.array([best_th]))[0]
     return float(best_h), contact, int(best_why), s0
@@ -880,7 +926,7 @@ def largest_inscribed(mech: Mechanism, mode: Any = None, shape: str = "disc",
                       None = None, limits: Mapping[str, Any] | None = None,
                       gamma: float = 0.0, length: float = 1.0, bounds: Any = None,
                       rays: int = 128, steps: int = 64, family: Any = None,
-                      z: Any = None) -> Inscribed:
+                      z: Any = None, exact: bool = True) -> Inscribed:
     """The largest disc (radius) or square (half side) free of singularities, in one working
     mode and aspect, within actuator ``limits`` and with 1/kappa >= ``gamma``.
 
@@ -908,8 +954,12 @@ def largest_inscribed(mech: Mechanism, mode: Any = None, shape: str = "disc",
     length : float
         Characteristic length for the conditioning of mixed units.
     rays, steps : int
-        Rays from the centre and march steps along each (then bisection to 1e-13 of the
-        size, and Brent's method over the direction of the nearest exit).
+        Rays from the centre and march steps along each (then the boundary to 1e-13 of
+        the size, and the nearest exit's direction refined).
+    exact : bool
+        False: a quick estimate for searches (centres on a line by two batched scans, no
+        refinement of directions; a little larger than the exact size, by about
+        size (pi / rays)^2 / 2), ``status="inaccurate"``.
 
     Returns
     -------
@@ -927,30 +977,29 @@ def largest_inscribed(mech: Mechanism, mode: Any = None, shape: str = "disc",
         raise MechanismError("give centre or line, not both")
     if centre is not None:
         c = as_vector(centre, "centre", 2)
-        h, P, why, s0 = _inscribed_at(pr, c, shape, rays, steps)
+        h, P, why, s0 = _inscribed_at(pr, c, shape, rays, steps, refine=exact)
+    elif not exact and line is not None:
+        a, u, (s_lo, s_hi) = _line_arg(line)
+        S = np.linspace(s_lo, s_hi, 24)
+        co = _coarse(pr, a[None] + S[:, None] * u[None], shape, 32, 24, 1e-5)
+        k = int(np.argmax(co))
+        ds = S[1] - S[0]
+        S2 = np.linspace(max(s_lo, S[k] - ds), min(s_hi, S[k] + ds), 17)
+        co2 = _coarse(pr, a[None] + S2[:, None] * u[None], shape, rays, 32, 1e-7)
+        k2 = int(np.argmax(co2))
+        c = a + S2[k2] * u
+        h, P, why, s0 = _inscribed_at(pr, c, shape, rays, steps, refine=False)
     else:
         if line is not None:
-            try:
-                a, u, (s_lo, s_hi) = line
-                a = as_vector(a, "line point", 2)
-                u = as_vector(u, "line direction", 2)
-                s_lo, s_hi = float(s_lo), float(s_hi)
-            except (TypeError, ValueError) as e:
-                raise MechanismError("line: expected ((x, y), (dx, dy), (s_lo, s_hi)), got "
-                                     f"{show(line)}") from e
-            if not s_lo < s_hi or not np.linalg.norm(u) > 0:
-                raise MechanismError(f"line: s_lo < s_hi and a nonzero direction required, "
-                                     f"got {show(line)}")
-            u = u / np.linalg.norm(u)
+            a, u, (s_lo, s_hi) = _line_arg(line)
             S = np.linspace(s_lo, s_hi, 32)
-            coarse = np.array([_inscribed_at(pr, a + s * u, shape, 64, 32, refine=False)[0]
-                               for s in S])
+            coarse = _coarse(pr, a[None] + S[:, None] * u[None], shape, 64, 32)
             k = int(np.argmax(coarse))
             ds = S[1] - S[0]
             res = minimize_scalar(
                 lambda s: -_inscribed_at(pr, a + s * u, shape, rays, steps)[0],
                 bounds=(max(s_lo, S[k] - ds), min(s_hi, S[k] + ds)), method="bounded",
-                options={"xatol": 1e-9 * pr.scale})
+                options={"xatol": 1e-8 * pr.scale})
             c = a + float(res.x) * u
         else:
             from scipy.optimize import minimize
@@ -965,8 +1014,7 @@ def largest_inscribed(mech: Mechanism, mode: Any = None, shape: str = "disc",
                 return Inscribed(shape, 0.0, np.full(2, np.nan), np.full(2, np.nan), "none",
                                  0, pr.evals[0], False, "infeasible",
                                  "no feasible point of the working mode within the bounds")
-            coarse = np.array([_inscribed_at(pr, cc, shape, 32, 32, refine=False)[0]
-                               for cc in C])
+            coarse = _coarse(pr, C, shape, 32, 32)
             order = np.argsort(-coarse)[:4]
             best_c, best_h = C[order[0]], -1.0
             for i in order:
@@ -984,4 +1032,22 @@ def largest_inscribed(mech: Mechanism, mode: Any = None, shape: str = "disc",
         return Inscribed(shape, 0.0, c, c, _REASON.get(why, "none"), int(s0), pr.evals[0],
                          False, "infeasible", f"the centre {np.round(c, 6)} is not a feasible "
                          f"point of the working mode {pr.sigma} ({_REASON.get(why)})")
+    if not exact:
+        return Inscribed(shape, h, c, P, _REASON[why], int(s0), pr.evals[0], True,
+                         "inaccurate", "a quick estimate (exact=False)")
     return Inscribed(shape, h, c, P, _REASON[why], int(s0), pr.evals[0])
+
+
+def _line_arg(line: Any) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
+    try:
+        a, u, (s_lo, s_hi) = line
+        a = as_vector(a, "line point", 2)
+        u = as_vector(u, "line direction", 2)
+        s_lo, s_hi = float(s_lo), float(s_hi)
+    except (TypeError, ValueError, MechanismError) as e:
+        raise MechanismError("line: expected ((x, y), (dx, dy), (s_lo, s_hi)), got "
+                             f"{show(line)}") from e
+    if not s_lo < s_hi or not np.linalg.norm(u) > 0:
+        raise MechanismError(f"line: s_lo < s_hi and a nonzero direction required, "
+                             f"got {show(line)}")
+    return a, u / np.linalg.norm(u), (s_lo, s_hi)

@@ -73,6 +73,9 @@ class DesignResult:
     method : str
     mechanism : Mechanism
         The optimum as a mechanism.
+    details : dict
+        ``"objective"``: the objective's full result where it has one (the
+        :class:`~optkin.design.Inscribed` shape: centre, contact, binding).
     """
 
     dimensions: dict[str, float]
@@ -85,13 +88,16 @@ class DesignResult:
     history: list[tuple[int, float]]
     method: str
     mechanism: Any = None
+    details: dict[str, Any] | None = None
     time: float = 0.0
     success: bool = True
     status: str = "optimal"
     message: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        d = {k: v for k, v in self.__dict__.items() if k != "mechanism"}
+        d = {k: v for k, v in self.__dict__.items() if k not in ("mechanism", "details")}
+        d["details"] = {k: (v.to_dict() if hasattr(v, "to_dict") else v)
+                        for k, v in (self.details or {}).items()}
         return _jsonable(d)
 
     def __repr__(self) -> str:
@@ -165,13 +171,17 @@ class _Counter:
         self.history: list[tuple[int, float]] = []
         self.deadline = deadline
 
-    def penalised(self, Z: np.ndarray) -> np.ndarray:
+    def penalised(self, Z: np.ndarray, search: bool = False) -> np.ndarray:
         Z = np.atleast_2d(Z)
         self.n += len(Z)
-        f = self.sign * self.meas.values(self.fam, Z)
+
+        def val(m: Measure) -> np.ndarray:
+            return m.search_values(self.fam, Z) if search else m.values(self.fam, Z)
+
+        f = self.sign * val(self.meas)
         viol = self.fam.bound_violation(Z)
         for c in self.cons:
-            viol = viol + c.violation(c.measure.values(self.fam, Z))
+            viol = viol + c.violation(val(c.measure))
         f = np.where(np.isfinite(f), f, 1e6) + PENALTY * viol
         k = int(np.argmin(f))
         if f[k] < self.best:
@@ -366,12 +376,16 @@ def optimize(family: Callable[..., Any] | Family, variables: Mapping[str, Any] |
         def stop(*_a: Any, **_k: Any) -> bool:
             return time.perf_counter() > deadline
 
-        differential_evolution(lambda X: ctr.penalised(X.T), bounds, vectorized=True,
+        differential_evolution(lambda X: ctr.penalised(X.T, search=True), bounds,
+                               vectorized=True,
                                updating="deferred", seed=seed, popsize=popsize,
                                maxiter=maxiter, polish=False, tol=1e-8, callback=stop,
                                init="sobol" if len(bounds) > 1 else "latinhypercube")
         timed_out = time.perf_counter() > deadline
         z = ctr.best_z
+        if z is not None:   # the search's estimate replaced by the exact value
+            ctr.best = np.inf
+            ctr.penalised(z[None])
     else:
         z = fam.centre()
         ctr.penalised(z[None])
@@ -386,28 +400,36 @@ def optimize(family: Callable[..., Any] | Family, variables: Mapping[str, Any] |
         if st != "optimal":
             status, message = st, msg
     elif not timed_out and method in ("auto", "global"):
+        # Nelder-Mead from the global best, on the search's values (the measures' quick
+        # estimates where they have them); the design it ends at is evaluated exactly
         span = fam.upper - fam.lower
+        z_start = np.asarray(z, dtype=float)
+        f_start = float(ctr.penalised(z_start[None], search=True)[0])
 
         def fz(v: np.ndarray) -> float:
             v = np.clip(v, fam.lower, fam.upper)
-            return float(ctr.penalised(v[None])[0])
+            if time.perf_counter() > deadline:
+                return f_start
+            return float(ctr.penalised(v[None], search=True)[0])
 
-        simplex = np.vstack([z] + [z + 0.02 * span * np.eye(len(z))[i]
-                                   for i in range(len(z))])
-        res = minimize(fz, z, method="Nelder-Mead",
+        simplex = np.vstack([z_start] + [z_start + 0.02 * span * np.eye(len(z_start))[i]
+                                         for i in range(len(z_start))])
+        res = minimize(fz, z_start, method="Nelder-Mead",
                        options={"initial_simplex": np.clip(simplex, fam.lower, fam.upper),
-                                "xatol": 1e-9 * float(span.max()), "fatol": 1e-12,
-                                "maxfev": 400})
+                                "xatol": 1e-4 * float(span.max()), "fatol": 1e-7,
+                                "maxfev": 30 * len(z_start) + 20})
         zn = np.clip(res.x, fam.lower, fam.upper)
-        if fz(zn) <= ctr.best + 1e-15:
-            z = zn
-        else:
-            z = ctr.best_z
+        z = zn if res.fun <= f_start else z_start
         used = "global+nelder-mead"
     if time.perf_counter() > deadline:
         status, message = "iteration_limit", f"time limit of {time_limit:g} s reached"
     z = np.asarray(z, dtype=float)
-    value = float(meas.values(fam, z[None])[0])
+    details: dict[str, Any] = {}
+    if hasattr(meas, "result"):
+        details["objective"] = meas.result(fam, z)
+        value = float(details["objective"].size)
+    else:
+        value = float(meas.values(fam, z[None])[0])
     measures = {repr(meas): value}
     active, verification = [], {}
     viol = float(fam.bound_violation(z))
@@ -433,6 +455,7 @@ def optimize(family: Callable[..., Any] | Family, variables: Mapping[str, Any] |
     return DesignResult(dimensions=fam.dims(z), z=z, value=value, measures=measures,
                         active=active, verification=verification, evaluations=ctr.n,
                         history=ctr.history, method=used, mechanism=fam.mechanism(z),
+                        details=details,
                         time=time.perf_counter() - t0, success=ok and status == "optimal",
                         status=status, message=message)
 

@@ -36,6 +36,10 @@ class Measure:
     def values(self, family: Any, Z: np.ndarray) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
 
+    def search_values(self, family: Any, Z: np.ndarray) -> np.ndarray:
+        """Values for the global search (cheaper estimates where a measure has them)."""
+        return self.values(family, Z)
+
     def symbolic(self, family: Any, z: ca.MX, nodes: Any = None) -> ca.MX:
         raise MechanismError(f"{self.name} is not smooth in the dimensions; optimize it with "
                              "method='global'")
@@ -246,9 +250,14 @@ class LargestInscribed(Measure):
             centre = centre(family.dims(z))
         return largest_inscribed(None, line=line, centre=centre, family=family, z=z, **kw)
 
-    def values(self, family: Any, Z: np.ndarray) -> np.ndarray:
+    def values(self, family: Any, Z: np.ndarray, exact: bool = True) -> np.ndarray:
         Z = np.atleast_2d(Z)
-        return np.array([self.result(family, z).size for z in Z])
+        return np.array([self.result(family, z, exact=exact).size for z in Z])
+
+    def search_values(self, family: Any, Z: np.ndarray) -> np.ndarray:
+        """Quick estimates for the global search (:func:`largest_inscribed`'s
+        ``exact=False``)."""
+        return self.values(family, Z, exact=False)
 
 
 class AspectArea(Measure):
