@@ -17,6 +17,7 @@ whole evaluation is one SX graph, mapped over points and designs together.
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 import casadi as ca
@@ -52,10 +53,10 @@ def _inv_kappa_3(M: ca.SX) -> ca.SX:
     q = ca.trace(S) / 3
     p1 = S[0, 1] ** 2 + S[0, 2] ** 2 + S[1, 2] ** 2
     p2 = (S[0, 0] - q) ** 2 + (S[1, 1] - q) ** 2 + (S[2, 2] - q) ** 2 + 2 * p1
-    pp = ca.sqrt(p2 / 6)
-    safe = ca.fmax(pp, 1e-300)
-    Bm = (S - q * ca.SX.eye(3)) / safe
-    r = ca.fmin(ca.fmax(ca.det(Bm) / 2, -1), 1)
+    # (tiny offsets keep the derivatives finite at isotropy and at repeated eigenvalues)
+    pp = ca.sqrt(p2 / 6 + 1e-300)
+    Bm = (S - q * ca.SX.eye(3)) / pp
+    r = ca.fmin(ca.fmax(ca.det(Bm) / 2, -1 + 1e-15), 1 - 1e-15)
     phi = ca.acos(r) / 3
     e1 = q + 2 * pp * ca.cos(phi)
     e3 = q + 2 * pp * ca.cos(phi + 2 * np.pi / 3)
@@ -66,7 +67,8 @@ class Evaluator:
     """The compiled point evaluation of one topology (see the module docstring).
 
     ``evaluate(T, sigma, p0, M, D, length)`` with T (N, nt) task points and the geometry
-    p0 + M d (d a row of D: a design per point; see :mod:`optkin.design.family`) returns a dict of arrays: ``qa`` (N, na), ``valid`` (N,) (every leg
+    p0 + M d (d a row of D: a design per point; M None and D whole geometry vectors: p0 +
+    d; see :mod:`optkin.design.family`) returns a dict of arrays: ``qa`` (N, na), ``valid`` (N,) (every leg
     reaches on the branch of its working-mode sign), ``det`` (N,) det A, ``inv_kappa``
     (N,), ``sv`` (N, nt) the singular values of J (largest first; velocity
     amplification), NaN where invalid; ``reach`` (N, na) each leg's continuous reach
@@ -135,20 +137,24 @@ class Evaluator:
         self._no_design = ca.DM.zeros(self.np, 1)
         self._fns: dict[int, ca.Function] = {}
         self._maps: dict[tuple[int, int], ca.Function] = {}
+        self._tls = threading.local()
 
     def _fn(self, k: int) -> ca.Function:
-        """The evaluation with the geometry p = p0 + M d (d: k design variables),
-        compiled when a compiler is present."""
+        """The evaluation with the geometry p = p0 + M d (d: k design variables; k = -1:
+        p = p0 + d, whole geometry vectors per point), compiled when a compiler is
+        present."""
         f = self._fns.get(k)
         if f is None:
             t = ca.SX.sym("t", self.nt)
-            d = ca.SX.sym("d", k)
+            d = ca.SX.sym("d", self.np if k < 0 else k)
             p0 = ca.SX.sym("p0", self.np)
-            M = ca.SX.sym("M", self.np, k)
+            M = ca.SX.sym("M", self.np, 1 if k < 0 else k)
             sig = ca.SX.sym("sigma", self.na)
             L = ca.SX.sym("length")
-            out = self._point(t, p0 + ca.mtimes(M, d), sig, L)
-            f = ca.Function(f"design_eval_{self.nt}_{k}", [t, d, p0, M, sig, L], out,
+            p = p0 + d if k < 0 else p0 + ca.mtimes(M, d)
+            out = self._point(t, p, sig, L)
+            tag = "p" if k < 0 else str(k)
+            f = ca.Function(f"design_eval_{self.nt}_{tag}", [t, d, p0, M, sig, L], out,
                             ["t", "d", "p0", "M", "sigma", "length"],
                             ["qa", "valid", "det", "inv_kappa", "Jinv", "reach"])
             lib = cc.library(f"design:{self.key}:{k}", [f]) if cc.find_compiler() else None
@@ -160,7 +166,7 @@ class Evaluator:
     def _mapped(self, k: int, n: int) -> ca.Function:
         f = self._maps.get((k, n))
         if f is None:
-            f = self._maps[(k, n)] = self._fn(k).map(f"design_map_{k}_{n}", "serial", n,
+            f = self._maps[(k, n)] = self._fn(k).map(f"design_map_{k % 1000}_{n}", "serial", n,
                                                      [2, 3, 4, 5], [])
         return f
 
@@ -172,13 +178,18 @@ class Evaluator:
         caller keeps (one per thread) for the preallocated calls."""
         T = np.atleast_2d(np.asarray(T, dtype=float))
         N = T.shape[0]
-        if M is None or D is None:
+        if D is None:
             M, D = None, np.zeros((N, 1))
         D = np.asarray(D, dtype=float).reshape(N, -1)
         k = D.shape[1]
+        if M is None and k == self.np:     # whole geometry vectors: p = p0 + d
+            k = -1
         Mf = np.zeros((self.np, 1)) if M is None else np.asarray(M, dtype=float)
         sig = np.asarray(sigma, dtype=float).reshape(-1)
-        buffers = {} if buffers is None else buffers
+        if buffers is None:   # one set of preallocated calls per thread
+            buffers = getattr(self._tls, "buffers", None)
+            if buffers is None:
+                buffers = self._tls.buffers = {}
         n = 1
         while n < min(N, CHUNK):
             n *= 2
@@ -186,21 +197,18 @@ class Evaluator:
         fast = buffers.get(key)
         if fast is None:
             fast = buffers[key] = cc.FastFn(self._mapped(k, n))
-        # the shared inputs: set when they change
-        shared = (id(p0), id(M), tuple(sig), float(length))
-        if buffers.get(("shared", key)) != shared:
-            fast._args[2][:] = np.ravel(p0)
-            fast._args[3][:] = np.ravel(Mf, order="F")
-            fast._args[4][:] = sig
-            fast._args[5][:] = float(length)
-            buffers[("shared", key)] = shared
+        # the shared inputs (a few hundred numbers: copied on every call)
+        fast._args[2][:] = np.ravel(p0)
+        fast._args[3][:] = np.ravel(Mf, order="F")
+        fast._args[4][:] = sig
+        fast._args[5][:] = float(length)
         nt, na = self.nt, self.na
         sizes = [na, 1, 1, 1, na * nt, na]
         outs = [np.empty((N, z)) for z in sizes]
         for s in range(0, N, n):
             m_ = min(n, N - s)
             tb = fast._args[0].reshape(n, nt)
-            db = fast._args[1].reshape(n, k)
+            db = fast._args[1].reshape(n, D.shape[1])
             tb[:m_] = T[s:s + m_]
             db[:m_] = D[s:s + m_]
             if m_ < n:

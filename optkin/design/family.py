@@ -221,12 +221,12 @@ class Family:
 
     def geometry(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(p0, M, D) with p = p0 + M d for the rows d of D, one per design in Z (N, k)
-        (a non-affine family: M = I and D the geometry vectors themselves)."""
+        (a non-affine family: M None and D the geometry vectors themselves)."""
         Z = np.atleast_2d(np.asarray(Z, dtype=float))
         if self.affine:
             return self.p0, self.M, Z
         P = np.array([self._p(z) for z in Z])
-        return np.zeros(P.shape[1]), np.eye(P.shape[1]), P
+        return np.zeros(P.shape[1]), None, P
 
     def same_topology(self, mech: Mechanism) -> bool:
         return get_model(mech).topology.key == self.key

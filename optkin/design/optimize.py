@@ -393,12 +393,17 @@ def optimize(family: Callable[..., Any] | Family, variables: Mapping[str, Any] |
         z = fam.centre()
     if not timed_out and method in ("auto", "ipopt") and smooth:
         z_loc, st, msg, _ = _ipopt(fam, meas, sign, cons, np.asarray(z), rounds, deadline)
+        f_glob = ctr.best
         f_loc = ctr.penalised(z_loc[None])[0]
-        if method == "ipopt" or f_loc <= ctr.best + 1e-12:
-            z = z_loc
         used = "global+ipopt" if method == "auto" else "ipopt"
-        if st != "optimal":
-            status, message = st, msg
+        if method == "ipopt" or (f_loc <= f_glob + 1e-12 and st == "optimal"):
+            z = z_loc
+            if st != "optimal":
+                status, message = st, msg
+        elif st != "optimal":
+            # the global search's design stands (verified below like any other)
+            message = f"the IPOPT polish stopped ({msg}); the global search's design is kept"
+            used = "global"
     elif not timed_out and method in ("auto", "global"):
         # Nelder-Mead from the global best, on the search's values (the measures' quick
         # estimates where they have them); the design it ends at is evaluated exactly
