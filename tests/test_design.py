@@ -43,12 +43,11 @@ def five_r(P, r1, r2, r3):
         rows.append(P - C)
         cols.append(np.sum((P - C) * perp, axis=1))
     Am = np.stack(rows, 1)                       # (N, 2, 2): rows (P - C_i)
-    Bm = np.zeros_like(Am)
-    Bm[:, 0, 0], Bm[:, 1, 1] = cols
     det = np.linalg.det(Am)
     with np.errstate(all="ignore"):
-        J = np.linalg.solve(Am, Bm)
-        s = np.linalg.svd(J, compute_uv=False)
+        Jinv = Am / np.stack(cols, 1)[:, :, None]      # B^-1 A (B diagonal)
+        Jinv = np.where(np.isfinite(Jinv), Jinv, 0.0)
+        s = np.linalg.svd(Jinv, compute_uv=False)
         ik = s[:, -1] / s[:, 0]
     return reach, det, np.where(reach, ik, np.nan)
 

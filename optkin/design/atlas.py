@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import as_int, show
+from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..results import _jsonable
 from .family import Family
@@ -86,6 +87,10 @@ class Atlas:
                 cl = ax.contour(X, Y, V, levels=cs.levels, colors="k", linewidths=0.4)
                 ax.clabel(cl, fmt="%.3g", fontsize=7)
                 fig.colorbar(cs, ax=ax, label=m)
+                k = np.unravel_index(np.nanargmax(V), V.shape)
+                ax.plot(X[k], Y[k], marker="*", ms=12, color="w", mec="k",
+                        label=f"largest: {V[k]:.4g}")
+                ax.legend(loc="best", fontsize=8)
             ax.set_xlabel(self.names[0])
             ax.set_ylabel(self.names[1])
             ax.set_title(m)
@@ -145,6 +150,7 @@ def atlas(family: Callable[..., Any] | Family, variables: Mapping[str, Any] | No
     if len(nn) != 2:
         raise MechanismError(f"n: expected an int or a pair, got {show(n)}")
     n0, n1 = (as_int(v, "n", lo=2, hi=2000) for v in nn)
+    checkpoint()
     ax0 = fam.lower[0] + (np.arange(n0) + 0.5) / n0 * (fam.upper[0] - fam.lower[0])
     ax1 = fam.lower[1] + (np.arange(n1) + 0.5) / n1 * (fam.upper[1] - fam.lower[1])
     X, Y = np.meshgrid(ax0, ax1)

@@ -29,6 +29,7 @@ import casadi as ca
 import numpy as np
 
 from .._checks import as_float, as_int, show
+from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..results import _jsonable
 from .family import Family
@@ -89,6 +90,8 @@ class DesignResult:
     method: str
     mechanism: Any = None
     details: dict[str, Any] | None = None
+    objective: str = ""
+    free: tuple[str, ...] = ()
     time: float = 0.0
     success: bool = True
     status: str = "optimal"
@@ -121,8 +124,11 @@ class DesignResult:
             h = np.array(self.history, dtype=float)
             ax.step(h[:, 0], h[:, 1], where="post", color="C0")
         ax.set_xlabel("designs evaluated")
-        ax.set_ylabel("best objective")
-        ax.set_title("design optimization")
+        ax.set_ylabel(f"best {self.objective}")
+        dims = ", ".join(f"{k} = {v:.4g}" for k, v in self.dimensions.items()
+                         if isinstance(v, float) and k in dict(zip(self.free, self.z)))
+        ax.set_title(f"design optimization: {self.objective} = {self.value:.5g}\n{dims}",
+                     fontsize=9)
         ax.grid(alpha=0.3)
         if path is not None:
             _save(fig, path)
@@ -186,7 +192,8 @@ class _Counter:
         k = int(np.argmin(f))
         if f[k] < self.best:
             self.best, self.best_z = float(f[k]), Z[k].copy()
-            self.history.append((self.n, float(-self.sign * f[k]) if viol[k] == 0
+            # the objective measure itself (f = sign * value when feasible)
+            self.history.append((self.n, float(self.sign * f[k]) if viol[k] == 0
                                  else float("nan")))
         return f
 
@@ -367,6 +374,7 @@ def optimize(family: Callable[..., Any] | Family, variables: Mapping[str, Any] |
     maxiter = as_int(maxiter, "maxiter", lo=1, hi=100000)
     time_limit = as_float(time_limit, "time_limit", lo=0.0)
     deadline = t0 + time_limit
+    checkpoint()
     smooth = meas.smooth and all(c.measure.smooth for c in cons) and fam.affine
     ctr = _Counter(fam, meas, sign, cons, deadline)
     status, message, used = "optimal", "", "global"
@@ -460,7 +468,7 @@ def optimize(family: Callable[..., Any] | Family, variables: Mapping[str, Any] |
     return DesignResult(dimensions=fam.dims(z), z=z, value=value, measures=measures,
                         active=active, verification=verification, evaluations=ctr.n,
                         history=ctr.history, method=used, mechanism=fam.mechanism(z),
-                        details=details,
+                        details=details, objective=repr(meas), free=fam.free,
                         time=time.perf_counter() - t0, success=ok and status == "optimal",
                         status=status, message=message)
 

@@ -29,6 +29,7 @@ BASE_COST: dict[str, float] = {
     "aspects": 1.2,
     "workspace": 0.6,
     "statics": 0.08,
+    "design": 6.0,
 }
 #: Seconds to load a problem and fetch its model (per unit of work).
 PROBLEM_COST = 0.05

@@ -895,6 +895,86 @@ class StaticsTask(TaskBase):
         return self
 
 
+class MeasureSpec(Strict):
+    """A design measure (``optkin.design``): ``measure`` ("gci", "min_conditioning",
+    "largest_inscribed", "aspect_area", "dimension"), its region (``region = { centre =
+    [x, y], radius = r }`` or ``{ lo = [x, y], hi = [x, y] }``), ``mode`` (the working
+    mode), ``fixed`` (the orientation of a 3-DoF platform), ``length``, ``order``;
+    largest inscribed shapes: ``shape``, ``centre`` or ``line = [[x, y], [dx, dy], [lo,
+    hi]]``, ``gamma``, ``limits``, ``bounds``; aspect areas: ``seed``; dimensions: ``of =
+    { name = coefficient }``. As an objective ``sense = "max"`` or ``"min"``; as a
+    constraint ``at_least`` or ``at_most``."""
+
+    measure: Literal["gci", "min_conditioning", "largest_inscribed", "aspect_area",
+                     "dimension"]
+    region: dict[str, Annotated[list[float], PlainValidator(_list_of(_number, "numbers"))]
+                 | Number] | None = None
+    mode: Annotated[list[float], PlainValidator(_list_of(_number, "signs"))] | None = None
+    fixed: dict[str, Number] | None = None
+    length: Number = 1.0
+    order: PositiveInt = 12
+    shape: Literal["disc", "square"] = "disc"
+    centre: Numbers(n=2) | None = None
+    line: Annotated[list[list[float]], PlainValidator(
+        _list_of(_list_of(_number, "numbers", n=2), "[point, direction, range]", n=3))] | None \
+        = None
+    gamma: Number = 0.0
+    limits: dict[str, Annotated[list[float], PlainValidator(_range)]] | None = None
+    bounds: _Ranges | None = None
+    seed: Numbers(n=2) | None = None
+    of: dict[str, Number] | None = None
+    sense: Literal["max", "min"] | None = None
+    at_least: Number | None = None
+    at_most: Number | None = None
+
+
+class EqualSpec(Strict):
+    """A linear equality among design variables: sum of coefficient x variable = value."""
+
+    coefficients: dict[str, Number]
+    value: Number
+
+
+class DesignTask(TaskBase):
+    """Dimensional synthesis (``optkin.design``): ``family`` (a factory of
+    ``optkin.mechanisms``), ``fixed`` (its constant arguments), ``variables`` ({ name = [lo,
+    hi] }), ``equal`` (linear equalities); ``analysis = "optimize"`` with ``objective``
+    and ``constraints`` (measures, :class:`MeasureSpec`), or ``"atlas"`` with ``measures``
+    (a table name -> measure) over an ``n`` x ``n`` grid."""
+
+    kind: Literal["design"]
+    analysis: Literal["optimize", "atlas"] = "optimize"
+    family: Str
+    fixed: dict[str, Number] = Field(default_factory=dict)
+    variables: dict[str, Annotated[list[float], PlainValidator(_range)]]
+    equal: list[EqualSpec] = Field(default_factory=list)
+    objective: MeasureSpec | None = None
+    constraints: list[MeasureSpec] = Field(default_factory=list)
+    measures: dict[str, MeasureSpec] | None = None
+    n: PositiveInt = 40
+    seed: NonNegInt = 0
+    maxiter: PositiveInt = 40
+    popsize: PositiveInt = 12
+    draw: Bool = True
+
+    @model_validator(mode="after")
+    def _needs(self) -> DesignTask:
+        def fail(key: str, msg: str) -> PydanticCustomError:
+            return PydanticCustomError("design", "{__loc__}" + msg, {"__loc__": f"[{key!r}]"})
+
+        if self.analysis == "optimize":
+            if self.objective is None:
+                raise fail("objective", "required for analysis = 'optimize'")
+            if self.objective.sense is None:
+                raise fail("objective", "give sense = 'max' or 'min'")
+            for i, c in enumerate(self.constraints):
+                if (c.at_least is None) == (c.at_most is None):
+                    raise fail("constraints", f"[{i}]: give exactly one of at_least, at_most")
+        elif not self.measures:
+            raise fail("measures", "required for analysis = 'atlas'")
+        return self
+
+
 #: Task kind -> its parameter model. Later issues add their kinds here.
 TASK_MODELS: dict[str, type[TaskBase]] = {
     "forward": ForwardTask,
@@ -909,6 +989,7 @@ TASK_MODELS: dict[str, type[TaskBase]] = {
     "aspects": AspectsTask,
     "workspace": WorkspaceTask,
     "statics": StaticsTask,
+    "design": DesignTask,
 }
 TASK_KINDS: tuple[str, ...] = tuple(TASK_MODELS)
 

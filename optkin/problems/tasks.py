@@ -476,6 +476,73 @@ def statics_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     return out
 
 
+def _measure(spec: Any, where: tuple) -> Any:
+    """An optkin.design measure from a :class:`MeasureSpec`."""
+    from optkin import design
+
+    def need(key: str, v: Any) -> Any:
+        if v is None:
+            raise MechanismError(f"measure {spec.measure!r} needs {key!r}",
+                                 path=(*where, key))
+        return v
+
+    region = None
+    if spec.region is not None:
+        r = dict(spec.region)
+        if set(r) == {"centre", "radius"}:
+            region = design.Disc(tuple(r["centre"]), float(r["radius"]))
+        elif set(r) == {"lo", "hi"}:
+            region = design.Box(tuple(r["lo"]), tuple(r["hi"]))
+        else:
+            raise MechanismError("region: expected { centre = [x, y], radius = r } or "
+                                 f"{{ lo = [x, y], hi = [x, y] }}, got keys {sorted(r)}",
+                                 path=(*where, "region"))
+    mode = None if spec.mode is None else tuple(int(v) for v in spec.mode)
+    kw = dict(mode=mode, fixed=spec.fixed, length=spec.length)
+    if spec.measure == "gci":
+        return design.GCI(need("region", region), order=spec.order, **kw)
+    if spec.measure == "min_conditioning":
+        return design.MinConditioning(need("region", region), order=spec.order, **kw)
+    if spec.measure == "largest_inscribed":
+        line = None if spec.line is None else (spec.line[0], spec.line[1], spec.line[2])
+        return design.LargestInscribed(shape=spec.shape, centre=spec.centre, line=line,
+                                       gamma=spec.gamma, limits=spec.limits,
+                                       bounds=spec.bounds, **kw)
+    if spec.measure == "aspect_area":
+        return design.AspectArea(need("seed", spec.seed), limits=spec.limits,
+                                 gamma=spec.gamma, bounds=spec.bounds, **kw)
+    return design.Dimension(need("of", spec.of))
+
+
+@register("design")
+def design_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
+    """``optkin.design.optimize`` or ``optkin.design.atlas`` over a library family (+ a
+    PNG: the convergence, or the atlas' contour maps)."""
+    from optkin import design
+
+    build = library_function(f"mechanisms.{task.family}", "design")
+    equal = [(dict(e.coefficients), float(e.value)) for e in task.equal]
+    variables = {k: tuple(v) for k, v in task.variables.items()}
+    if task.analysis == "atlas":
+        meas = {k: _measure(m, ("measures", k)) for k, m in task.measures.items()}
+        res = design.atlas(build, variables, meas, n=task.n, fixed=task.fixed, equal=equal)
+        out = _generic(res)
+        out["best"] = {k: res.best(k) for k in meas}
+    else:
+        obj = _measure(task.objective, ("objective",))
+        objective = design.Maximize(obj) if task.objective.sense == "max" else \
+            design.Minimize(obj)
+        cons = []
+        for i, c in enumerate(task.constraints):
+            m = _measure(c, ("constraints", i))
+            cons.append(m >= c.at_least if c.at_least is not None else m <= c.at_most)
+        res = design.optimize(build, variables, objective, cons, fixed=task.fixed,
+                              equal=equal, seed=task.seed, maxiter=task.maxiter,
+                              popsize=task.popsize)
+        out = _generic(res)
+    return _with_picture(out, res, ctx) if task.draw else out
+
+
 def run_task(mech: Any, task: TaskBase, ctx: TaskContext) -> dict[str, Any]:
     """Run one task through the registry (exceptions propagate to the runner).
 
