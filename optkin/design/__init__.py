@@ -12,6 +12,7 @@ mechanism's dimensions over them, and atlases over a design space.
 
 from .atlas import Atlas, atlas
 from .family import Family
+from .force import ForceCapability, LegStroke
 from .measures import (
     Aspect,
     Box,
@@ -37,7 +38,7 @@ from .problem import (
     Minimize,
 )
 
-__all__ = ["Atlas", "atlas", "Family", "Aspect", "Box", "Disc", "Inscribed", "Integral", "area",
+__all__ = ["Atlas", "atlas", "Family", "ForceCapability", "LegStroke", "Aspect", "Box", "Disc", "Inscribed", "Integral", "area",
            "conditioning", "gci", "largest_inscribed", "singular_values", "DesignResult",
            "optimize", "GCI", "AspectArea", "Constraint", "Dimension", "LargestInscribed",
            "Maximize", "Measure", "MinConditioning", "Minimize"]

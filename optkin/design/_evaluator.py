@@ -134,90 +134,17 @@ class Evaluator:
                                   ["t", "p", "sigma", "length"],
                                   ["qa", "valid", "det", "inv_kappa", "Jinv", "reach"])
         self.np = int(p.shape[0])
-        self._no_design = ca.DM.zeros(self.np, 1)
-        self._fns: dict[int, ca.Function] = {}
-        self._maps: dict[tuple[int, int], ca.Function] = {}
-        self._tls = threading.local()
-
-    def _fn(self, k: int) -> ca.Function:
-        """The evaluation with the geometry p = p0 + M d (d: k design variables; k = -1:
-        p = p0 + d, whole geometry vectors per point), compiled when a compiler is
-        present."""
-        f = self._fns.get(k)
-        if f is None:
-            t = ca.SX.sym("t", self.nt)
-            d = ca.SX.sym("d", self.np if k < 0 else k)
-            p0 = ca.SX.sym("p0", self.np)
-            M = ca.SX.sym("M", self.np, 1 if k < 0 else k)
-            sig = ca.SX.sym("sigma", self.na)
-            L = ca.SX.sym("length")
-            p = p0 + d if k < 0 else p0 + ca.mtimes(M, d)
-            out = self._point(t, p, sig, L)
-            tag = "p" if k < 0 else str(k)
-            f = ca.Function(f"design_eval_{self.nt}_{tag}", [t, d, p0, M, sig, L], out,
-                            ["t", "d", "p0", "M", "sigma", "length"],
-                            ["qa", "valid", "det", "inv_kappa", "Jinv", "reach"])
-            lib = cc.library(f"design:{self.key}:{k}", [f]) if cc.find_compiler() else None
-            if lib is not None:
-                f = lib[f.name()]
-            self._fns[k] = f
-        return f
-
-    def _mapped(self, k: int, n: int) -> ca.Function:
-        f = self._maps.get((k, n))
-        if f is None:
-            f = self._maps[(k, n)] = self._fn(k).map(f"design_map_{k % 1000}_{n}", "serial", n,
-                                                     [2, 3, 4, 5], [])
-        return f
+        self._run = Mapped(self._point, f"design:{self.key}", self.np)
 
     def evaluate(self, T: np.ndarray, sigma: Any, p0: np.ndarray, M: np.ndarray | None = None,
                  D: np.ndarray | None = None, length: float = 1.0, jacobian: bool = False,
                  buffers: dict | None = None) -> dict[str, np.ndarray]:
         """Evaluate at the task points T (N, nt) with the geometry p0 + M d, d the rows of
-        D (N, k) (one design per point; None: p0 everywhere). ``buffers``: a dict the
-        caller keeps (one per thread) for the preallocated calls."""
-        T = np.atleast_2d(np.asarray(T, dtype=float))
-        N = T.shape[0]
-        if D is None:
-            M, D = None, np.zeros((N, 1))
-        D = np.asarray(D, dtype=float).reshape(N, -1)
-        k = D.shape[1]
-        if M is None and k == self.np:     # whole geometry vectors: p = p0 + d
-            k = -1
-        Mf = np.zeros((self.np, 1)) if M is None else np.asarray(M, dtype=float)
-        sig = np.asarray(sigma, dtype=float).reshape(-1)
-        if buffers is None:   # one set of preallocated calls per thread
-            buffers = getattr(self._tls, "buffers", None)
-            if buffers is None:
-                buffers = self._tls.buffers = {}
-        n = 1
-        while n < min(N, CHUNK):
-            n *= 2
-        key = (k, n)
-        fast = buffers.get(key)
-        if fast is None:
-            fast = buffers[key] = cc.FastFn(self._mapped(k, n))
-        # the shared inputs (a few hundred numbers: copied on every call)
-        fast._args[2][:] = np.ravel(p0)
-        fast._args[3][:] = np.ravel(Mf, order="F")
-        fast._args[4][:] = sig
-        fast._args[5][:] = float(length)
+        D (N, k) (one design per point; None: p0 everywhere)."""
         nt, na = self.nt, self.na
-        sizes = [na, 1, 1, 1, na * nt, na]
-        outs = [np.empty((N, z)) for z in sizes]
-        for s in range(0, N, n):
-            m_ = min(n, N - s)
-            tb = fast._args[0].reshape(n, nt)
-            db = fast._args[1].reshape(n, D.shape[1])
-            tb[:m_] = T[s:s + m_]
-            db[:m_] = D[s:s + m_]
-            if m_ < n:
-                tb[m_:] = T[s + m_ - 1]
-                db[m_:] = D[s + m_ - 1]
-            fast._trig()
-            for o, r, z in zip(outs, fast._res, sizes):
-                o[s:s + m_] = r.reshape(n, z)[:m_]
-        qa, valid, det, ik, jinv, reach = outs
+        qa, valid, det, ik, jinv, reach = self._run(
+            T, p0, M, D, [np.asarray(sigma, dtype=float).reshape(-1), float(length)], buffers)
+        N = len(qa)
         det, ik = det[:, 0], ik[:, 0]
         with np.errstate(invalid="ignore"):
             ok = (valid[:, 0] > 0.5) & np.isfinite(det) & np.all(np.isfinite(qa), axis=1)
@@ -230,6 +157,96 @@ class Evaluator:
                 sv = 1.0 / sv[:, ::-1]   # singular values of J = inverses of J^-1's
             out["sv"] = np.where(ok[:, None], sv, np.nan)
         return out
+
+
+class Mapped:
+    """A point Function ``f(t, p, *shared)`` evaluated at many points, each with its own
+    design: the geometry p = p0 + M d (d: k design variables per point) or p = p0 + d
+    (whole geometry vectors per point), mapped over the points with p0, M and the shared
+    inputs unmapped, compiled once per topology and k (when a compiler is present), and
+    called through preallocated buffers (one set per thread)."""
+
+    def __init__(self, point: ca.Function, tag: str, n_p: int) -> None:
+        self.point, self.tag, self.np = point, tag, n_p
+        self.nt = point.size1_in(0)
+        self.n_shared = point.n_in() - 2
+        self.sizes = [point.nnz_out(i) for i in range(point.n_out())]
+        self._fns: dict[int, ca.Function] = {}
+        self._maps: dict[tuple[int, int], ca.Function] = {}
+        self._tls = threading.local()
+        self._lock = threading.Lock()
+
+    def _fn(self, k: int) -> ca.Function:
+        f = self._fns.get(k)
+        if f is None:
+            t = ca.SX.sym("t", self.nt)
+            d = ca.SX.sym("d", self.np if k < 0 else k)
+            p0 = ca.SX.sym("p0", self.np)
+            M = ca.SX.sym("M", self.np, 1 if k < 0 else k)
+            shared = [ca.SX.sym(f"s{i}", self.point.sparsity_in(2 + i))
+                      for i in range(self.n_shared)]
+            p = p0 + d if k < 0 else p0 + ca.mtimes(M, d)
+            out = self.point(t, p, *shared)
+            out = out if isinstance(out, (list, tuple)) else [out]
+            name = f"{self.point.name()}_{'p' if k < 0 else k}"
+            f = ca.Function(name, [t, d, p0, M, *shared], list(out))
+            lib = cc.library(f"{self.tag}:{name}", [f]) if cc.find_compiler() else None
+            if lib is not None:
+                f = lib[f.name()]
+            self._fns[k] = f
+        return f
+
+    def _mapped(self, k: int, n: int) -> ca.Function:
+        with self._lock:
+            f = self._maps.get((k, n))
+            if f is None:
+                f = self._maps[(k, n)] = self._fn(k).map(
+                    f"map_{self.point.name()}_{k % 1000}_{n}", "serial", n,
+                    list(range(2, 4 + self.n_shared)), [])
+        return f
+
+    def __call__(self, T: np.ndarray, p0: np.ndarray, M: np.ndarray | None,
+                 D: np.ndarray | None, shared: list, buffers: dict | None = None
+                 ) -> list[np.ndarray]:
+        """The outputs (N, size) at the points T (N, nt)."""
+        T = np.atleast_2d(np.asarray(T, dtype=float))
+        N = T.shape[0]
+        if D is None:
+            M, D = None, np.zeros((N, 1))
+        D = np.asarray(D, dtype=float).reshape(N, -1)
+        k = D.shape[1]
+        if M is None and k == self.np:     # whole geometry vectors: p = p0 + d
+            k = -1
+        Mf = np.zeros((self.np, 1)) if M is None else np.asarray(M, dtype=float)
+        if buffers is None:
+            buffers = getattr(self._tls, "buffers", None)
+            if buffers is None:
+                buffers = self._tls.buffers = {}
+        n = 1
+        while n < min(N, CHUNK):
+            n *= 2
+        fast = buffers.get((k, n))
+        if fast is None:
+            fast = buffers[(k, n)] = cc.FastFn(self._mapped(k, n))
+        fast._args[2][:] = np.ravel(p0)          # the shared inputs: a few hundred numbers
+        fast._args[3][:] = np.ravel(Mf, order="F")
+        for i, v in enumerate(shared):
+            fast._args[4 + i][:] = np.ravel(np.asarray(v, dtype=float), order="F")
+        nt, nd = self.nt, D.shape[1]
+        outs = [np.empty((N, z)) for z in self.sizes]
+        for s in range(0, N, n):
+            m_ = min(n, N - s)
+            tb = fast._args[0].reshape(n, nt)
+            db = fast._args[1].reshape(n, nd)
+            tb[:m_] = T[s:s + m_]
+            db[:m_] = D[s:s + m_]
+            if m_ < n:
+                tb[m_:] = T[s + m_ - 1]
+                db[m_:] = D[s + m_ - 1]
+            fast._trig()
+            for o, r, z in zip(outs, fast._res, self.sizes):
+                o[s:s + m_] = r.reshape(n, z)[:m_]
+        return outs
 
 
 def evaluator(mech: Any) -> Evaluator:

@@ -486,6 +486,9 @@ def _verify(fam: Family, c: Constraint, z: np.ndarray) -> dict[str, Any]:
         finally:
             m.order = old
         how = "quadrature of twice the order"
+    elif hasattr(m, "lo") and hasattr(m, "n"):      # a box of poses
+        v = float(m.values(fam, z[None], dense=2)[0])
+        how = "grid of the box twice as fine"
     elif isinstance(m, Dimension):
         v = float(m.values(fam, z[None])[0])
         how = "exact"
