@@ -587,3 +587,25 @@ def test_force_capability_of_a_planar_platform_and_errors():
             design.Family(lambda a: liu(a, 1.5, 0.5), {"a": (0.9, 1.1)}), np.array([[1.0]]))
     with pytest.raises(MechanismError, match="poses have 3"):
         design.ForceCapability([0, 0], [1, 1]).values(fam, np.array([[1.0]]))
+
+
+def test_joint_range_over_a_disc_matches_the_numpy_inverse():
+    """The proximal angles (both elbows outward) over the disc's nodes and boundary, unwrapped
+    about the centre's: the largest max - min."""
+    r1, r2, r3 = 1.0, 1.5, 0.5
+    fam = design.Family(lambda a: liu(a, r2, r3), {"a": (0.9, 1.1)})
+    disc = design.Disc((r3, 1.3), 0.4)
+    got = design.JointRange(disc, OUT).values(fam, np.array([[r1]]))[0]
+    one = design.JointRange(disc, OUT, joint="L2.theta1").values(fam, np.array([[r1]]))[0]
+    P = np.vstack([[0.0, 1.3], disc.nodes(12)[0] - [r3, 0], disc.boundary(96) - [r3, 0]])
+    spans = []
+    for A, side in ((np.array([-r3, 0.0]), +1), (np.array([r3, 0.0]), -1)):
+        v = P - A
+        d = np.hypot(v[:, 0], v[:, 1])
+        th = np.arctan2(v[:, 1], v[:, 0]) + side * np.arccos((r1 ** 2 + d ** 2 - r2 ** 2)
+                                                             / (2 * r1 * d))
+        rel = (th - th[0] + np.pi) % (2 * np.pi) - np.pi
+        spans.append(rel.max() - rel.min())
+    assert abs(got - max(spans)) < 1e-10 and abs(one - spans[1]) < 1e-10
+    far = design.JointRange(design.Disc((r3, 1.3), 3.0), OUT).values(fam, np.array([[r1]]))
+    assert far[0] == np.inf

@@ -31,6 +31,7 @@ from .problem import (
     AspectArea,
     Constraint,
     Dimension,
+    JointRange,
     LargestInscribed,
     Maximize,
     Measure,
@@ -40,5 +41,5 @@ from .problem import (
 
 __all__ = ["Atlas", "atlas", "Family", "ForceCapability", "LegStroke", "Aspect", "Box", "Disc", "Inscribed", "Integral", "area",
            "conditioning", "gci", "largest_inscribed", "singular_values", "DesignResult",
-           "optimize", "GCI", "AspectArea", "Constraint", "Dimension", "LargestInscribed",
+           "optimize", "GCI", "AspectArea", "Constraint", "Dimension", "JointRange", "LargestInscribed",
            "Maximize", "Measure", "MinConditioning", "Minimize"]

@@ -37,6 +37,7 @@ from .problem import (
     GCI,
     Constraint,
     Dimension,
+    JointRange,
     Maximize,
     Measure,
     MinConditioning,
@@ -475,7 +476,7 @@ def optimize(family: Callable[..., Any] | Family, variables: Mapping[str, Any] |
 
 def _verify(fam: Family, c: Constraint, z: np.ndarray) -> dict[str, Any]:
     m = c.measure
-    if isinstance(m, MinConditioning):
+    if isinstance(m, (MinConditioning, JointRange)):
         v = float(m.values(fam, z[None], dense=3)[0])
         how = "nodes 3x denser, with the boundary"
     elif isinstance(m, GCI):

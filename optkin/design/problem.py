@@ -23,7 +23,7 @@ from ..errors import MechanismError
 from ._evaluator import Evaluator
 from .measures import Box, Disc, _box_arg, _mode_arg, _probe, aspect_integral, largest_inscribed
 
-__all__ = ["Measure", "Constraint", "Maximize", "Minimize", "GCI", "MinConditioning",
+__all__ = ["Measure", "Constraint", "Maximize", "Minimize", "GCI", "MinConditioning", "JointRange",
            "LargestInscribed", "AspectArea", "Dimension"]
 
 
@@ -220,6 +220,48 @@ class MinConditioning(_RegionMeasure):
         same = np.sign(o["raw_det"]) == s
         ik = np.where(same & o["valid"], ik, 0.0)
         return ik.min(axis=1)
+
+
+class JointRange(_RegionMeasure):
+    """The actuator travel needed to cover a disc or box in a working mode: the largest,
+    over the actuated joints, of max - min of the joint's value over the region's nodes
+    and boundary (angles unwrapped about their value at the region's centre; a node out of
+    reach makes it infinite). ``joint`` names one actuated joint instead."""
+
+    name = "joint range"
+
+    def __init__(self, region: Any, mode: Any = None,
+                 fixed: Mapping[str, float] | None = None, order: int = 12,
+                 boundary: int = 96, joint: str | None = None) -> None:
+        super().__init__(region, mode, fixed, 1.0, order)
+        self.boundary, self.joint = int(boundary), joint
+        if joint is not None:
+            self.name = f"range of {joint}"
+
+    points = MinConditioning.points
+
+    def values(self, family: Any, Z: np.ndarray, dense: int = 1) -> np.ndarray:
+        Z = np.atleast_2d(Z)
+        if isinstance(self.region, (Disc, Box)):
+            mode, T = self.points(family, dense)
+        else:
+            Ts = [self.points(family, dense, z) for z in Z]
+            mode, T = Ts[0][0], np.stack([t for _, t in Ts])
+        o = _batch(family, Z, T, mode, 1.0)
+        qa = o["qa"]                                       # (nZ, nT, na)
+        mech = family.model0.mech
+        ang = np.array([bool(mech.revolute[i]) for i in mech.active_index])
+        rel = qa - qa[:, :1]
+        rel[..., ang] = (rel[..., ang] + np.pi) % (2 * np.pi) - np.pi
+        span = rel.max(axis=1) - rel.min(axis=1)           # (nZ, na)
+        span = np.where(o["valid"].all(axis=1)[:, None], span, np.inf)
+        if self.joint is not None:
+            names = list(mech.active_names)
+            if self.joint not in names:
+                raise MechanismError(f"JointRange: {show(self.joint)} is not an actuated joint; "
+                                     f"known: {', '.join(names)}")
+            return span[:, names.index(self.joint)]
+        return span.max(axis=1)
 
 
 class LargestInscribed(Measure):

@@ -902,11 +902,13 @@ class MeasureSpec(Strict):
     mode), ``fixed`` (the orientation of a 3-DoF platform), ``length``, ``order``;
     largest inscribed shapes: ``shape``, ``centre`` or ``line = [[x, y], [dx, dy], [lo,
     hi]]``, ``gamma``, ``limits``, ``bounds``; aspect areas: ``seed``; dimensions: ``of =
-    { name = coefficient }``. As an objective ``sense = "max"`` or ``"min"``; as a
+    { name = coefficient }``; joint ranges: ``joint`` (default: the largest); force
+    capability and leg strokes over a box of poses ``region = { lo = [...], hi = [...] }``
+    (every task coordinate) on an ``n``-point grid per coordinate, ``fmax``. As an objective ``sense = "max"`` or ``"min"``; as a
     constraint ``at_least`` or ``at_most``."""
 
     measure: Literal["gci", "min_conditioning", "largest_inscribed", "aspect_area",
-                     "dimension"]
+                     "dimension", "joint_range", "force_capability", "leg_stroke"]
     region: dict[str, Annotated[list[float], PlainValidator(_list_of(_number, "numbers"))]
                  | Number] | None = None
     mode: Annotated[list[float], PlainValidator(_list_of(_number, "signs"))] | None = None
@@ -923,6 +925,9 @@ class MeasureSpec(Strict):
     bounds: _Ranges | None = None
     seed: Numbers(n=2) | None = None
     of: dict[str, Number] | None = None
+    joint: Str | None = None
+    fmax: Number = 1.0
+    n: PositiveInt = 3
     sense: Literal["max", "min"] | None = None
     at_least: Number | None = None
     at_most: Number | None = None

@@ -486,6 +486,15 @@ def _measure(spec: Any, where: tuple) -> Any:
                                  path=(*where, key))
         return v
 
+    if spec.measure in ("force_capability", "leg_stroke"):
+        r = dict(need("region", spec.region))
+        if set(r) != {"lo", "hi"}:
+            raise MechanismError("region: a box of poses { lo = [...], hi = [...] } (every "
+                                 f"task coordinate), got keys {sorted(r)}",
+                                 path=(*where, "region"))
+        if spec.measure == "force_capability":
+            return design.ForceCapability(r["lo"], r["hi"], fmax=spec.fmax, n=spec.n)
+        return design.LegStroke(r["lo"], r["hi"], n=spec.n)
     region = None
     if spec.region is not None:
         r = dict(spec.region)
@@ -508,6 +517,9 @@ def _measure(spec: Any, where: tuple) -> Any:
         return design.LargestInscribed(shape=spec.shape, centre=spec.centre, line=line,
                                        gamma=spec.gamma, limits=spec.limits,
                                        bounds=spec.bounds, **kw)
+    if spec.measure == "joint_range":
+        return design.JointRange(need("region", region), mode=mode, fixed=spec.fixed,
+                                 order=spec.order, joint=spec.joint)
     if spec.measure == "aspect_area":
         return design.AspectArea(need("seed", spec.seed), limits=spec.limits,
                                  gamma=spec.gamma, bounds=spec.bounds, **kw)
