@@ -10,6 +10,7 @@ trapezoid of Liu, Wang and Pritschow's normalised design space r1 + r2 + r3 = 3)
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -86,14 +87,14 @@ class Atlas:
                 cs = ax.contourf(X, Y, V, levels=levels, cmap="viridis")
                 cl = ax.contour(X, Y, V, levels=cs.levels, colors="k", linewidths=0.4)
                 ax.clabel(cl, fmt="%.3g", fontsize=7)
-                fig.colorbar(cs, ax=ax, label=m)
+                fig.colorbar(cs, ax=ax, label=m if len(m) <= 24 else "value")
                 k = np.unravel_index(np.nanargmax(V), V.shape)
                 ax.plot(X[k], Y[k], marker="*", ms=12, color="w", mec="k",
                         label=f"largest: {V[k]:.4g}")
                 ax.legend(loc="best", fontsize=8)
             ax.set_xlabel(self.names[0])
             ax.set_ylabel(self.names[1])
-            ax.set_title(m)
+            ax.set_title(textwrap.fill(m, 44), fontsize=10)
             ax.set_aspect("equal", adjustable="box")
         fig.tight_layout()
         if path is not None:
