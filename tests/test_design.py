@@ -183,8 +183,11 @@ def test_liu_largest_inscribed_circle_on_the_axis(r):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("r", LIU_DESIGNS[2:])
-def test_liu_largest_inscribed_circle_on_the_axis_more(r):
+@pytest.mark.parametrize("r", LIU_DESIGNS[2:] + [
+    (r1, r2, 3 - r1 - r2) for r1 in (0.6, 0.9, 1.2) for r2 in (1.3, 1.6, 1.9)
+    if 3 - r1 - r2 >= 0.1])
+def test_liu_largest_inscribed_circle_on_the_axis_grid(r):
+    """A grid of Liu's normalised designs (r1 + r2 + r3 = 3)."""
     test_liu_largest_inscribed_circle_on_the_axis(r)
 
 
@@ -609,3 +612,14 @@ def test_joint_range_over_a_disc_matches_the_numpy_inverse():
     assert abs(got - max(spans)) < 1e-10 and abs(one - spans[1]) < 1e-10
     far = design.JointRange(design.Disc((r3, 1.3), 3.0), OUT).values(fam, np.array([[r1]]))
     assert far[0] == np.inf
+
+
+def test_atlas_in_worker_processes_equals_the_serial_one():
+    meas = {"GCI": design.GCI(design.Disc((0.5, 1.2), 0.2), OUT),
+            "square": design.LargestInscribed(OUT, shape="square", centre=(0.5, 1.3),
+                                              rays=32, steps=24)}
+    kw = dict(variables={"a": (0.6, 1.4), "b": (0.6, 1.8)}, measures=meas, n=5)
+    one = design.atlas(lambda a, b: optkin.mechanisms.five_bar(1.0, a, b, b, a), **kw)
+    two = design.atlas(lambda a, b: optkin.mechanisms.five_bar(1.0, a, b, b, a), jobs=2, **kw)
+    for k in meas:
+        assert np.allclose(one.values[k], two.values[k], rtol=0, atol=1e-12), k

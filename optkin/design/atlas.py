@@ -105,7 +105,8 @@ class Atlas:
 def atlas(family: Callable[..., Any] | Family, variables: Mapping[str, Any] | None = None,
           measures: Mapping[str, Measure] | Sequence[Measure] = (), *, n: int | Sequence[int]
           = 50, fixed: Mapping[str, Any] | None = None,
-          equal: Sequence[tuple[Mapping[str, float], float]] = ()) -> Atlas:
+          equal: Sequence[tuple[Mapping[str, float], float]] = (), jobs: int = 1,
+          client: Any = None) -> Atlas:
     """Evaluate measures over an n x n grid of two free design variables.
 
     Parameters
@@ -115,6 +116,11 @@ def atlas(family: Callable[..., Any] | Family, variables: Mapping[str, Any] | No
     measures : mapping name -> Measure, or sequence of Measure
     n : int or (n0, n1)
         Grid points per variable (between the bounds, ends excluded by half a cell).
+    jobs : int
+        Worker processes (the grid in chunks; the family and measures sent with
+        cloudpickle, so lambdas work). 1: in this process.
+    client : dask.distributed.Client, optional
+        Send the chunks to a Dask cluster instead (as ``optkin run --scheduler`` does).
 
     Returns
     -------
@@ -157,13 +163,53 @@ def atlas(family: Callable[..., Any] | Family, variables: Mapping[str, Any] | No
     X, Y = np.meshgrid(ax0, ax1)
     Z = np.stack([X.ravel(), Y.ravel()], -1)
     inside = fam.bound_violation(Z) <= 0
-    values = {}
-    for k, m in measures.items():
-        v = np.full(len(Z), np.nan)
-        if inside.any():
-            v[inside] = m.values(fam, Z[inside])
-        values[k] = v.reshape(X.shape)
+    jobs = as_int(jobs, "jobs", lo=1, hi=1024)
+    values = {k: np.full(len(Z), np.nan) for k in measures}
+    Zin = Z[inside]
+    if len(Zin) and (jobs > 1 or client is not None):
+        payload = _dumps((fam.build, {k: (a, b) for k, a, b in zip(
+            fam.names, fam.all_lower, fam.all_upper)}, fam.fixed,
+            [({fam.names[i]: float(coef[i]) for i in np.flatnonzero(coef)}, val)
+             for _, coef, val in fam._eq], dict(measures)))
+        parts = np.array_split(Zin, max(1, 4 * (jobs if client is None else 8)))
+        parts = [p_ for p_ in parts if len(p_)]
+        if client is not None:
+            futs = client.map(_chunk, [payload] * len(parts), parts, pure=False)
+            results = client.gather(futs)
+        else:
+            import concurrent.futures as cf
+            import multiprocessing as mp
+
+            with cf.ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as ex:
+                results = list(ex.map(_chunk, [payload] * len(parts), parts))
+        got = {k: np.concatenate([r[k] for r in results]) for k in measures}
+        for k in measures:
+            values[k][inside] = got[k]
+    elif len(Zin):
+        for k, m in measures.items():
+            values[k][inside] = m.values(fam, Zin)
+    values = {k: v.reshape(X.shape) for k, v in values.items()}
     full = fam.full(Z)
     dims = {name: full[:, i].reshape(X.shape) for i, name in enumerate(fam.names)}
     return Atlas(names=(fam.free[0], fam.free[1]), axes=(ax0, ax1), values=values, dims=dims,
                  time=time.perf_counter() - t0)
+
+
+def _dumps(obj: Any) -> bytes:
+    try:
+        import cloudpickle
+
+        return cloudpickle.dumps(obj)
+    except ImportError:  # plain pickle: module-level functions only
+        import pickle
+
+        return pickle.dumps(obj)
+
+
+def _chunk(payload: bytes, Z: np.ndarray) -> dict[str, np.ndarray]:
+    """A worker's part of an atlas: the family rebuilt, every measure at the designs Z."""
+    import pickle
+
+    build, variables, fixed, equal, measures = pickle.loads(payload)
+    fam = Family(build, variables, fixed, equal)
+    return {k: m.values(fam, Z) for k, m in measures.items()}
