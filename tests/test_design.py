@@ -623,3 +623,23 @@ def test_atlas_in_worker_processes_equals_the_serial_one():
     two = design.atlas(lambda a, b: optkin.mechanisms.five_bar(1.0, a, b, b, a), jobs=2, **kw)
     for k in meas:
         assert np.allclose(one.values[k], two.values[k], rtol=0, atol=1e-12), k
+
+
+def test_largest_box_of_a_given_aspect_matches_a_scaled_brute_force():
+    """A box with half sides (h, h / 2) centred at a point: the scaled L-infinity distance
+    from the centre to a dense cloud of points that are out of reach or of the other sign
+    of det A (numpy 5R)."""
+    r1, r2, r3 = 1.0, 1.5, 0.5
+    c = np.array([0.2, 1.4])                       # Liu's frame
+    got = design.largest_inscribed(liu(r1, r2, r3), OUT, shape="box", aspect=(2, 1),
+                                   centre=c + [r3, 0])
+    h = 0.003
+    X, Y = np.meshgrid(np.arange(-1.5, 2, h), np.arange(0, 2.8, h))
+    P = np.stack([X.ravel(), Y.ravel()], -1)
+    reach, det, _ = five_r(P, r1, r2, r3)
+    s0 = np.sign(five_r(c[None], r1, r2, r3)[1][0])
+    bad = P[~reach | (np.sign(det) != s0)]
+    d = np.max(np.abs(bad - c) / [1.0, 0.5], axis=1).min()
+    assert got.shape == "box" and got.aspect == (1.0, 0.5)
+    assert abs(got.size - d) < 2 * h
+    assert abs(got.area - 4 * 0.5 * got.size ** 2) < 1e-15

@@ -361,8 +361,10 @@ def singular_values(mech: Mechanism, points: Any, mode: Any = None,
                     fixed: Mapping[str, float] | None = None,
                     length: float = 1.0) -> np.ndarray:
     """Singular values of the forward Jacobian J (N, n), largest first: the largest and
-    smallest end-effector speed per unit actuator speed (their reciprocals bound the
-    force per unit actuator effort); NaN where unreachable."""
+    smallest end-effector speed per unit actuator speed; their reciprocals bound the
+    end-effector force per unit actuator effort, and with equal actuator stiffnesses k the
+    end-effector stiffness k J^-T J^-1 has eigenvalues k / sigma_i^2 (its extremes). NaN
+    where unreachable."""
     pr = _probe(mech, mode, fixed, length=length)
     P = np.asarray(points, dtype=float).reshape(-1, 2)
     return pr.eval(P, jacobian=True)["sv"]
@@ -788,7 +790,7 @@ class Inscribed:
         Point evaluations spent.
     """
 
-    shape: str
+    shape: Any
     size: float
     centre: np.ndarray
     contact: np.ndarray
@@ -799,9 +801,13 @@ class Inscribed:
     status: str = "optimal"
     message: str = ""
 
+    aspect: tuple[float, float] = (1.0, 1.0)
+
     @property
     def area(self) -> float:
-        return float(np.pi * self.size ** 2 if self.shape == "disc" else 4 * self.size ** 2)
+        if self.shape == "disc":
+            return float(np.pi * self.size ** 2)
+        return float(4 * self.aspect[0] * self.aspect[1] * self.size ** 2)
 
     def to_dict(self) -> dict[str, Any]:
         d = self.__dict__.copy()
@@ -814,10 +820,14 @@ class Inscribed:
                 f"binding={self.binding!r}, status={self.status!r})")
 
 
-def _unit(shape: str, th: np.ndarray) -> np.ndarray:
+def _unit(shape: Any, th: np.ndarray) -> np.ndarray:
+    """Points of the unit shape's boundary at polar angles th: the circle, the square's
+    (L-infinity) boundary, or a box's ``("box", ax, ay)`` (half sides ax, ay)."""
     u = np.stack([np.cos(th), np.sin(th)], -1)
-    if shape == "square":
+    if shape != "disc":
         u = u / np.max(np.abs(u), axis=1, keepdims=True)
+    if isinstance(shape, tuple):
+        u = u * np.array([shape[1], shape[2]])
     return u
 
 
@@ -926,7 +936,8 @@ def largest_inscribed(mech: Mechanism, mode: Any = None, shape: str = "disc",
                       None = None, limits: Mapping[str, Any] | None = None,
                       gamma: float = 0.0, length: float = 1.0, bounds: Any = None,
                       rays: int = 128, steps: int = 64, family: Any = None,
-                      z: Any = None, exact: bool = True) -> Inscribed:
+                      z: Any = None, exact: bool = True, aspect: Any = (1.0, 1.0)
+                      ) -> Inscribed:
     """The largest disc (radius) or square (half side) free of singularities, in one working
     mode and aspect, within actuator ``limits`` and with 1/kappa >= ``gamma``.
 
@@ -935,7 +946,9 @@ def largest_inscribed(mech: Mechanism, mode: Any = None, shape: str = "disc",
     mech : Mechanism
     mode : tuple of int
         The working mode (signs of diag B).
-    shape : {"disc", "square"}
+    shape : {"disc", "square", "box"}
+        A box has half sides in the ratio ``aspect`` (x, y); its ``size`` is the longer
+        half side.
     centre : (x, y), optional
         Centre the shape here.
     line : ((x, y), (dx, dy), (s_lo, s_hi)), optional
@@ -965,8 +978,16 @@ def largest_inscribed(mech: Mechanism, mode: Any = None, shape: str = "disc",
     -------
     Inscribed
     """
-    if shape not in ("disc", "square"):
-        raise MechanismError(f"shape: expected 'disc' or 'square', got {show(shape)}")
+    if shape not in ("disc", "square", "box"):
+        raise MechanismError(f"shape: expected 'disc', 'square' or 'box', got {show(shape)}")
+    aspect_ = (1.0, 1.0)
+    if shape == "box":
+        a_ = as_vector(aspect, "aspect", 2)
+        if not np.all(a_ > 0):
+            raise MechanismError(f"aspect: expected two positive numbers, got {show(aspect)}")
+        a_ = a_ / a_.max()
+        aspect_ = (float(a_[0]), float(a_[1]))
+        shape = ("box", aspect_[0], aspect_[1])
     pr = _probe(mech, mode, fixed, limits, gamma, length, family, z)
     rays = as_int(rays, "rays", lo=8, hi=100000)
     steps = as_int(steps, "steps", lo=8, hi=100000)
@@ -1011,9 +1032,10 @@ def largest_inscribed(mech: Mechanism, mode: Any = None, shape: str = "disc",
             code, o = pr.reasons(C)
             C = C[code == 0]
             if len(C) == 0:
-                return Inscribed(shape, 0.0, np.full(2, np.nan), np.full(2, np.nan), "none",
-                                 0, pr.evals[0], False, "infeasible",
-                                 "no feasible point of the working mode within the bounds")
+                nan2 = np.full(2, np.nan)
+                return _named(Inscribed(shape, 0.0, nan2, nan2, "none", 0, pr.evals[0], False,
+                                        "infeasible", "no feasible point of the working mode "
+                                        "within the bounds"), aspect_)
             coarse = _coarse(pr, C, shape, 32, 32)
             order = np.argsort(-coarse)[:4]
             best_c, best_h = C[order[0]], -1.0
@@ -1029,13 +1051,21 @@ def largest_inscribed(mech: Mechanism, mode: Any = None, shape: str = "disc",
             c = np.asarray(best_c, dtype=float)
         h, P, why, s0 = _inscribed_at(pr, c, shape, rays, steps)
     if h <= 0:
-        return Inscribed(shape, 0.0, c, c, _REASON.get(why, "none"), int(s0), pr.evals[0],
-                         False, "infeasible", f"the centre {np.round(c, 6)} is not a feasible "
-                         f"point of the working mode {pr.sigma} ({_REASON.get(why)})")
+        return _named(Inscribed(shape, 0.0, c, c, _REASON.get(why, "none"), int(s0),
+                                pr.evals[0], False, "infeasible",
+                                f"the centre {np.round(c, 6)} is not a feasible point of the "
+                                f"working mode {pr.sigma} ({_REASON.get(why)})"), aspect_)
     if not exact:
-        return Inscribed(shape, h, c, P, _REASON[why], int(s0), pr.evals[0], True,
-                         "inaccurate", "a quick estimate (exact=False)")
-    return Inscribed(shape, h, c, P, _REASON[why], int(s0), pr.evals[0])
+        return _named(Inscribed(shape, h, c, P, _REASON[why], int(s0), pr.evals[0], True,
+                         "inaccurate", "a quick estimate (exact=False)"), aspect_)
+    return _named(Inscribed(shape, h, c, P, _REASON[why], int(s0), pr.evals[0]), aspect_)
+
+
+def _named(res: Inscribed, aspect: tuple[float, float]) -> Inscribed:
+    if isinstance(res.shape, tuple):
+        res.shape = "box"
+    res.aspect = aspect
+    return res
 
 
 def _line_arg(line: Any) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:

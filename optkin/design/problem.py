@@ -275,10 +275,10 @@ class LargestInscribed(Measure):
                  line: Any = None, fixed: Mapping[str, float] | None = None,
                  limits: Mapping[str, Any] | None = None, gamma: float = 0.0,
                  length: float = 1.0, bounds: Any = None, rays: int = 64,
-                 steps: int = 48) -> None:
+                 steps: int = 48, aspect: Any = (1.0, 1.0)) -> None:
         self.kw = dict(mode=mode, shape=shape, centre=centre, line=line, fixed=fixed,
                        limits=limits, gamma=gamma, length=length, bounds=bounds, rays=rays,
-                       steps=steps)
+                       steps=steps, aspect=aspect)
         self.name = f"largest inscribed {shape}"
 
     def result(self, family: Any, z: Any, **over: Any) -> Any:

@@ -900,7 +900,7 @@ class MeasureSpec(Strict):
     "largest_inscribed", "aspect_area", "dimension"), its region (``region = { centre =
     [x, y], radius = r }`` or ``{ lo = [x, y], hi = [x, y] }``), ``mode`` (the working
     mode), ``fixed`` (the orientation of a 3-DoF platform), ``length``, ``order``;
-    largest inscribed shapes: ``shape``, ``centre`` or ``line = [[x, y], [dx, dy], [lo,
+    largest inscribed shapes: ``shape`` (and a box's ``aspect``), ``centre`` or ``line = [[x, y], [dx, dy], [lo,
     hi]]``, ``gamma``, ``limits``, ``bounds``; aspect areas: ``seed``; dimensions: ``of =
     { name = coefficient }``; joint ranges: ``joint`` (default: the largest); force
     capability and leg strokes over a box of poses ``region = { lo = [...], hi = [...] }``
@@ -915,7 +915,8 @@ class MeasureSpec(Strict):
     fixed: dict[str, Number] | None = None
     length: Number = 1.0
     order: PositiveInt = 12
-    shape: Literal["disc", "square"] = "disc"
+    shape: Literal["disc", "square", "box"] = "disc"
+    aspect: Numbers(n=2) = Field(default_factory=lambda: [1.0, 1.0])
     centre: Numbers(n=2) | None = None
     line: Annotated[list[list[float]], PlainValidator(
         _list_of(_list_of(_number, "numbers", n=2), "[point, direction, range]", n=3))] | None \

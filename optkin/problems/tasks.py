@@ -514,7 +514,8 @@ def _measure(spec: Any, where: tuple) -> Any:
         return design.MinConditioning(need("region", region), order=spec.order, **kw)
     if spec.measure == "largest_inscribed":
         line = None if spec.line is None else (spec.line[0], spec.line[1], spec.line[2])
-        return design.LargestInscribed(shape=spec.shape, centre=spec.centre, line=line,
+        return design.LargestInscribed(shape=spec.shape, aspect=tuple(spec.aspect),
+                                       centre=spec.centre, line=line,
                                        gamma=spec.gamma, limits=spec.limits,
                                        bounds=spec.bounds, **kw)
     if spec.measure == "joint_range":
