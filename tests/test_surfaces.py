@@ -46,6 +46,7 @@ def rpr():
 def test_vertices_make_the_legs_concurrent(rpr, space):
     s = singular_surfaces(rpr, space=space, limits=LIMITS, slices=24)
     assert s.success, s.message
+    assert s.planes == []     # no section of this design is wholly singular
     assert len(s.triangles) > 100 and s.max_residual < 1e-9
     x, y, phi = s.v[:, 3], s.v[:, 4], s.v[:, 5]
     d = _concurrency(x, y, phi)
@@ -68,3 +69,44 @@ def test_arguments(rpr):
         singular_surfaces(rpr, space="both")
     with pytest.raises(optkin.MechanismError, match="not a 3-DoF planar platform"):
         singular_surfaces(optkin.mechanisms.five_bar(9, 8, 5, 5, 8))
+
+
+def test_similar_triangles_make_whole_sections_singular():
+    """A 3-RPR whose platform is its base scaled by s = 0.5: at phi = 0 the platform point
+    P_i = t + s A_i, so every leg line A_i + lambda (P_i - A_i) passes through the
+    homothety centre H = t / (1 - s) (lambda = 1 / (1 - s)) whatever t: the whole section
+    is singular, and so is phi = pi (the scale -s). Those sections are reported as planes
+    and meshed; every vertex, patches and traced curves alike, makes the leg lines
+    concurrent or parallel (the determinant of their line coordinates, written here)."""
+    base = np.array([[0.0, 0.0], [10.0, 0.0], [3.0, 8.0]])
+    s_ = 0.5
+    m = optkin.mechanisms.rpr3(base, s_ * base)
+    lim = {f"L{i}.rho": (2.0, 15.0) for i in (1, 2, 3)}
+    surf = singular_surfaces(m, space="task", limits=lim, slices=24)
+    assert surf.success, surf.message
+    assert 0.0 in surf.planes and -np.pi in surf.planes and len(surf.planes) == 2
+    x, y, phi = surf.v[:, 3], surf.v[:, 4], surf.v[:, 5]
+    c, s = np.cos(phi), np.sin(phi)
+    P = np.stack([x[:, None] + s_ * (c[:, None] * base[None, :, 0] - s[:, None] * base[None, :, 1]),
+                  y[:, None] + s_ * (s[:, None] * base[None, :, 0] + c[:, None] * base[None, :, 1])],
+                 -1)
+    h = lambda Q: np.concatenate([Q, np.ones(Q.shape[:-1] + (1,))], -1)  # noqa: E731
+    lines = np.cross(h(np.broadcast_to(base, P.shape)), h(P))
+    lines /= np.linalg.norm(lines[..., :2], axis=-1, keepdims=True)
+    assert np.max(np.abs(np.linalg.det(lines))) < 1e-6
+    # the phi = 0 patch: every leg through H = t / (1 - s)
+    at0 = np.abs(phi) < 1e-12
+    H = np.stack([x[at0], y[at0]], -1) / (1 - s_)
+    dist = np.abs(np.einsum("nkj,nj->nk", lines[at0][..., :2], H) + lines[at0][..., 2])
+    assert at0.sum() > 100 and dist.max() < 1e-9
+    # it covers the section within the strokes (a grid of the plane, cells inside only)
+    tri = surf.triangles[np.all(at0[surf.triangles], axis=1)]
+    V = surf.vertices
+    e1, e2 = V[tri[:, 1], :2] - V[tri[:, 0], :2], V[tri[:, 2], :2] - V[tri[:, 0], :2]
+    patch = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
+    g = 0.02
+    X, Y = np.meshgrid(np.arange(-20, 30, g), np.arange(-20, 30, g))
+    Q = np.stack([X.ravel(), Y.ravel()], -1)
+    rho = np.linalg.norm(Q[:, None] + s_ * base[None] - base[None], axis=-1)
+    region = np.all((rho >= 2) & (rho <= 15), axis=1).sum() * g * g
+    assert 0.85 * region <= patch <= region * 1.001

@@ -51,6 +51,11 @@ class SingularSurface:
         The values of the third coordinate the curves were traced at.
     open_curves : int
         Curves left unstitched on one side (topology changes between sections).
+    planes : list of float
+        Values of the third coordinate whose whole section is singular (det A vanishes
+        identically there, e.g. phi = 0 for a 3-RPR whose platform is a scaled copy of its
+        base); each is meshed as a planar patch over the section's points within the
+        strokes (a grid of the plane: every point of it is on the surface).
     """
 
     mechanism: str
@@ -67,6 +72,7 @@ class SingularSurface:
     message: str
     time: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
+    planes: list[float] = field(default_factory=list)
 
     def __repr__(self) -> str:
         return (f"SingularSurface({self.mechanism!r}, {self.space}, {len(self.vertices)} "
@@ -81,7 +87,8 @@ class SingularSurface:
                 "success": self.success, "status": self.status, "message": self.message,
                 "n_vertices": int(len(self.vertices)), "n_triangles": int(len(self.triangles)),
                 "max_residual": self.max_residual, "open_curves": self.open_curves,
-                "n_sections": int(len(self.sections)), "time": self.time}
+                "n_sections": int(len(self.sections)), "time": self.time,
+                "planes": [float(v) for v in self.planes]}
 
     def plot(self, path: str | None = None, ax: Any = None, title: str | None = None,
              color: Any = None) -> Any:
@@ -197,11 +204,20 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
     secs: list[list[tuple[np.ndarray, np.ndarray, bool, np.ndarray]]] = []
     failed = []
     late = False
+    planes: list[float] = []
+    patches: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
     for val in values:
         if deadline.expired():
             late = True
             secs.append([])
             continue
+        if space == "task":
+            patch = _whole_section(mech, model, float(val), bounds, lim)
+            if patch is not None:
+                planes.append(float(val))
+                patches.append(patch)
+                secs.append([])
+                continue
         c = singular_curves(mech, plane=plane, kind="parallel", fixed={third: float(val)},
                             bounds=bounds, step=step, cusps=False)
         if not c.success:
@@ -270,6 +286,12 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
                 b2, Ib = b2[::-1], Ib[::-1]
             tri += _strip(a2, b2, Ia, Ib)
         open_curves += len(secs[kb]) - len(used)
+    for P, Vfull, r, Tp in patches:        # planar patches of wholly singular sections
+        verts.append(P)
+        full.append(Vfull)
+        res.append(r)
+        tri += [tuple(t_) for t_ in (Tp + n)]
+        n += len(P)
     V = np.vstack(verts) if verts else np.zeros((0, 3))
     Vf = np.vstack(full) if full else np.zeros((0, na + model.nx))
     R = np.concatenate(res) if res else np.zeros(0)
@@ -279,8 +301,77 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
            f"{space} space; max residual {R.max(initial=0.0):.1e}; {open_curves} curve(s) "
            "left open where the sections' topology changes"
            + (f"; {len(failed)} section(s) incomplete: {failed[0][1]}" if failed else "")
-           + ("; stopped at the time limit: later sections left out" if late else ""))
+           + ("; stopped at the time limit: later sections left out" if late else "")
+           + (f"; wholly singular section(s) at {', '.join(f'{v:.6g}' for v in planes)} "
+              "meshed as planar patches" if planes else ""))
     status = "optimal" if ok else "iteration_limit" if late else "inaccurate"
     return SingularSurface(mech.name, space, names, V, Vf, T, R, np.asarray(values),
                            open_curves, ok, status, msg,
-                           time.perf_counter() - t0)
+                           time.perf_counter() - t0, planes=planes)
+
+
+def _whole_section(mech: Mechanism, model: Any, val: float, bounds: Any, lim: dict,
+                   n: int = 41) -> tuple | None:
+    """If det A vanishes on the whole section at orientation ``val`` in some working mode
+    (|det A| below 1e-10 of its scale at 48 random points of the section where every leg
+    reaches), its planar patch: (vertices (V, 3), configurations, |det A|, triangles) over
+    an n x n grid of the section's box, cells whose corners all reach within the strokes;
+    else None."""
+    from ..design._evaluator import evaluator
+    from ..model.charts import planar_chart
+
+    try:
+        ev = evaluator(mech)
+    except MechanismError:
+        return None
+    chart = planar_chart(model)
+    box = np.asarray(bounds, dtype=float) if bounds is not None else (
+        chart.reach_box() if chart is not None else None)
+    if box is None:
+        return None
+    L = float(model.length)
+    ang = [i for i in range(3) if model.x_angle[i]][0]
+    tr = [i for i in range(3) if not model.x_angle[i]]
+    rng = np.random.default_rng(0)
+
+    def task(P: np.ndarray) -> np.ndarray:
+        T = np.zeros((len(P), 3))
+        T[:, tr[0]], T[:, tr[1]], T[:, ang] = P[:, 0], P[:, 1], val
+        return T
+
+    Ps = box[:, 0] + rng.random((400, 2)) * (box[:, 1] - box[:, 0])
+    for mode in model.working_modes():
+        o = ev.evaluate(task(Ps), mode, model.p)
+        ok = o["valid"]
+        if ok.sum() < 48:
+            continue
+        # det A scales as (size)^(number of length rows): compare with the legs' lengths
+        if np.max(np.abs(o["det"][ok][:48])) > 1e-10 * L ** 3:
+            continue
+        g0 = np.linspace(box[0, 0], box[0, 1], n)
+        g1 = np.linspace(box[1, 0], box[1, 1], n)
+        G0, G1 = np.meshgrid(g0, g1, indexing="ij")
+        P = np.stack([G0.ravel(), G1.ravel()], -1)
+        oo = ev.evaluate(task(P), mode, model.p)
+        inside = oo["valid"].copy()
+        for j, (a, b) in lim.items():
+            if j < model.na:
+                inside &= (oo["qa"][:, j] >= a) & (oo["qa"][:, j] <= b)
+        idx = np.full(len(P), -1)
+        idx[inside] = np.arange(inside.sum())
+        I = idx.reshape(n, n)
+        tris = []
+        for i in range(n - 1):
+            for k in range(n - 1):
+                a_, b_, c_, d_ = I[i, k], I[i + 1, k], I[i + 1, k + 1], I[i, k + 1]
+                if min(a_, b_, c_, d_) >= 0:
+                    tris += [(a_, b_, c_), (a_, c_, d_)]
+        if not tris:
+            return None
+        T3 = task(P[inside])
+        names = list(model.x_names)
+        V = np.stack([T3[:, names.index(model.x_names[tr[0]])],
+                      T3[:, names.index(model.x_names[tr[1]])], T3[:, ang]], -1)
+        full = np.hstack([oo["qa"][inside], T3])
+        return V, full, np.abs(oo["det"][inside]), np.array(tris, dtype=int)
+    return None
