@@ -158,6 +158,29 @@ class _RegionMeasure(Measure):
             Ts.append(pr.task(P))
         return mode, np.stack(Ts), W
 
+    boundary = 96
+
+    def points(self, family: Any, dense: int = 1, z: Any = None
+               ) -> tuple[tuple[int, ...], np.ndarray]:
+        mode = _mode_arg(family.model0, self.mode)
+        reg = self.region_of(family, family.z0 if z is None else z)
+        P, _ = reg.nodes(self.order * dense)
+        B = reg.boundary(self.boundary * dense)
+        c = np.mean(B, axis=0, keepdims=True) if isinstance(reg, Box) else \
+            np.array([reg.centre])
+        return mode, self._plane(family, mode).task(np.vstack([c, P, B]))
+
+    def _at_points(self, family: Any, Z: np.ndarray, dense: int) -> dict[str, np.ndarray]:
+        """The evaluation (arrays (nZ, nT)) at the region's centre, nodes and boundary
+        (:meth:`points`), for every design of Z."""
+        Z = np.atleast_2d(Z)
+        if isinstance(self.region, (Disc, Box)):
+            mode, T = self.points(family, dense)
+        else:
+            Ts = [self.points(family, dense, z) for z in Z]
+            mode, T = Ts[0][0], np.stack([t for _, t in Ts])
+        return _batch(family, Z, T, mode, self.length)
+
 
 class GCI(_RegionMeasure):
     """The global conditioning index over a prescribed disc or box (area-weighted mean of
@@ -197,24 +220,8 @@ class MinConditioning(_RegionMeasure):
         super().__init__(region, mode, fixed, length, order)
         self.boundary = int(boundary)
 
-    def points(self, family: Any, dense: int = 1, z: Any = None
-               ) -> tuple[tuple[int, ...], np.ndarray]:
-        mode = _mode_arg(family.model0, self.mode)
-        reg = self.region_of(family, family.z0 if z is None else z)
-        P, _ = reg.nodes(self.order * dense)
-        B = reg.boundary(self.boundary * dense)
-        c = np.mean(B, axis=0, keepdims=True) if isinstance(reg, Box) else \
-            np.array([reg.centre])
-        return mode, self._plane(family, mode).task(np.vstack([c, P, B]))
-
     def values(self, family: Any, Z: np.ndarray, dense: int = 1) -> np.ndarray:
-        Z = np.atleast_2d(Z)
-        if isinstance(self.region, (Disc, Box)):
-            mode, T = self.points(family, dense)
-        else:
-            Ts = [self.points(family, dense, z) for z in Z]
-            mode, T = Ts[0][0], np.stack([t for _, t in Ts])
-        o = _batch(family, Z, T, mode, self.length)
+        o = self._at_points(family, Z, dense)
         ik = np.nan_to_num(o["inv_kappa"])
         s = np.sign(o["raw_det"][:, :1])
         same = np.sign(o["raw_det"]) == s
@@ -238,16 +245,8 @@ class JointRange(_RegionMeasure):
         if joint is not None:
             self.name = f"range of {joint}"
 
-    points = MinConditioning.points
-
     def values(self, family: Any, Z: np.ndarray, dense: int = 1) -> np.ndarray:
-        Z = np.atleast_2d(Z)
-        if isinstance(self.region, (Disc, Box)):
-            mode, T = self.points(family, dense)
-        else:
-            Ts = [self.points(family, dense, z) for z in Z]
-            mode, T = Ts[0][0], np.stack([t for _, t in Ts])
-        o = _batch(family, Z, T, mode, 1.0)
+        o = self._at_points(family, Z, dense)
         qa = o["qa"]                                       # (nZ, nT, na)
         mech = family.model0.mech
         ang = np.array([bool(mech.revolute[i]) for i in mech.active_index])
