@@ -339,6 +339,19 @@ def _limit_map(mech, names, limits):
     return out
 
 
+def _first_range(who: str, model, names, lim) -> tuple[float, float]:
+    """The range of the first actuated joint: its limits, else its chart's natural range
+    (an angle's turn, a length's span)."""
+    if 0 in lim:
+        return lim[0]
+    from ..model.charts import planar_chart
+
+    chart = planar_chart(model)
+    if chart is None:
+        raise MechanismError(f"{who}: give limits for {names[0]} (its range is not known)")
+    return chart.actuator_range(0)
+
+
 def _region_faces(chart, curves, mode, bounds, snap, pidx, fixed_map, lim_map, with_parallel):
     kinds = ("serial", "limit", "parallel") if with_parallel else ("serial", "limit")
     lines = _runs(curves, mode, kinds)

@@ -636,7 +636,7 @@ def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices:
     budget): the sections not reached are left out and the result says so.
     """
     from ..limits import Deadline, time_budget
-    from .aspects import _limit_map
+    from .aspects import _first_range, _limit_map
     from .continuation import _names_of, singular_curves
 
     t0 = time.perf_counter()
@@ -650,15 +650,7 @@ def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices:
     slices = _positive_int(who, "slices", slices)
     names = _names_of(mech)
     lim = _limit_map(mech, names, limits)
-    if 0 in lim:
-        lo, hi = lim[0]
-    else:
-        from ..model.charts import planar_chart
-
-        chart = planar_chart(model)
-        if chart is None:
-            raise MechanismError(f"{who}: give limits for {names[0]} (its range is not known)")
-        lo, hi = chart.actuator_range(0)
+    lo, hi = _first_range(who, model, names, lim)
     values = np.linspace(lo, hi, slices + 2)[1:-1]
     gap = float(values[1] - values[0]) if len(values) > 1 else 1.0
     per: list[np.ndarray] = []

@@ -157,7 +157,7 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
         the result says so (status ``"iteration_limit"``).
     """
     from ..limits import Deadline, time_budget
-    from .aspects import _limit_map
+    from .aspects import _first_range, _limit_map
     from .continuation import _names_of, check_number, singular_curves
 
     t0 = time.perf_counter()
@@ -187,15 +187,7 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
         names = (model.x_names[0], model.x_names[1], third)
     else:
         third = names_all[0]
-        if 0 in lim:
-            lo, hi = lim[0]
-        else:
-            from ..model.charts import planar_chart
-
-            chart = planar_chart(model)
-            if chart is None:
-                raise MechanismError(f"{who}: give limits for {third} (its range is not known)")
-            lo, hi = chart.actuator_range(0)
+        lo, hi = _first_range(who, model, names_all, lim)
         values = np.linspace(lo, hi, int(slices) + 2)[1:-1]
         # the section plane (the other two actuated joints), then the sectioning joint
         plane, cols = "joint", [1, 2, 0]

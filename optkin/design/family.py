@@ -227,6 +227,3 @@ class Family:
             return self.p0, self.M, Z
         P = np.array([self._p(z) for z in Z])
         return np.zeros(P.shape[1]), None, P
-
-    def same_topology(self, mech: Mechanism) -> bool:
-        return get_model(mech).topology.key == self.key

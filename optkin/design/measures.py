@@ -209,7 +209,7 @@ class Probe:
             parts = [o["reach"].min(axis=1)]
             kinds = [REACH]
             if s0 is not None:
-                parts.append(np.asarray(s0) * o["raw_det"] / self.det_scale)
+                parts.append(np.asarray(s0) * o["raw_det"])
                 kinds.append(PARALLEL)
             if self.limits:
                 qa = o["qa"]
@@ -252,7 +252,6 @@ class Probe:
 
     ev_angle_qa: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     clip: np.ndarray | None = None
-    det_scale: float = 1.0
     _dm: Any = None
 
 
@@ -388,10 +387,6 @@ class Integral:
 
     def to_dict(self) -> dict[str, Any]:
         return _jsonable(self.__dict__.copy())
-
-
-def _fixed_nodes(region: Region, order: int) -> tuple[np.ndarray, np.ndarray]:
-    return region.nodes(order)
 
 
 def _section(pr: Probe, s0: float | None, lo: np.ndarray, hi: np.ndarray, points: Any,
@@ -726,7 +721,7 @@ def _integral(pr: Probe, region: Region, kind: str, order: int) -> Integral:
     if not isinstance(region, (Disc, Box)):
         raise MechanismError(f"region: expected optkin.design.Disc, Box or Aspect, got "
                              f"{type(region).__name__}")
-    P, W = _fixed_nodes(region, order)
+    P, W = region.nodes(order)
     code, o = pr.reasons(P)
     ok = code == 0
     A = float(W.sum())

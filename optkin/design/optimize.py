@@ -208,18 +208,18 @@ def _ipopt(fam: Family, meas: Measure, sign: float, cons: list[Constraint], z0: 
     A, b = fam.full_affine()
     g_lin = ca.mtimes(ca.DM(A), z) + ca.DM(b)
     # node sets for the region constraints: the objective's region and each MinConditioning
-    regions: list[tuple[Any, float, list[np.ndarray]]] = []   # (measure, gamma, [T blocks])
+    # (measure, gamma, working mode, [T blocks])
+    regions: list[tuple[Any, float, tuple, list[np.ndarray]]] = []
     for c in cons:
         if isinstance(c.measure, MinConditioning) and c.sense == ">=":
             mode, T = c.measure.points(fam)
-            regions.append((c.measure, c.bound, [T]))
+            regions.append((c.measure, c.bound, mode, [T]))
     if isinstance(meas, GCI):
         mode, T, _ = meas._setup(fam)
-        regions.append((meas, 0.0, [T]))
+        regions.append((meas, 0.0, mode, [T]))
     # det A signs at the start design, per region
     signs = []
-    for m_, _, blocks in regions:
-        mode = m_._setup(fam)[0] if isinstance(m_, GCI) else m_.points(fam)[0]
+    for m_, _, mode, blocks in regions:
         o = fam_eval(fam, z0, blocks[0][:1], mode, m_.length)
         signs.append(float(np.sign(o["raw_det"][0])) or 1.0)
     status, message = "optimal", ""
@@ -234,9 +234,8 @@ def _ipopt(fam: Family, meas: Measure, sign: float, cons: list[Constraint], z0: 
             g.append(e)
             lbg.append([c.bound if c.sense == ">=" else -np.inf])
             ubg.append([c.bound if c.sense == "<=" else np.inf])
-        for (m_, gam, blocks), s0 in zip(regions, signs):
+        for (m_, gam, mode, blocks), s0 in zip(regions, signs):
             T = np.vstack(blocks)
-            mode = m_._setup(fam)[0] if isinstance(m_, GCI) else m_.points(fam)[0]
             ik, det, reach = _sym_points(fam, T, mode, m_.length, z)
             n = T.shape[0]
             g += [ca.vec(reach), s0 * det.T]
@@ -267,14 +266,8 @@ def _ipopt(fam: Family, meas: Measure, sign: float, cons: list[Constraint], z0: 
         status, message = "optimal", ""
         # exchange: verify the region constraints on a denser set
         added = False
-        for idx, (m_, gam, blocks) in enumerate(regions):
-            if isinstance(m_, GCI):
-                mode, _, _ = m_._setup(fam)
-                P, _ = m_.region.nodes(2 * m_.order)
-                Td = np.vstack([m_._setup(fam)[1][:1], _plane_task(fam, m_, P),
-                                _plane_task(fam, m_, m_.region.boundary(192))])
-            else:
-                mode, Td = m_.points(fam, dense=2)
+        for idx, (m_, gam, mode, blocks) in enumerate(regions):
+            _, Td = m_.points(fam, dense=2)    # centre, nodes and boundary twice as dense
             o = fam_eval(fam, z_best, Td, mode, m_.length)
             bad = ~o["valid"] | (np.sign(o["raw_det"]) != signs[idx])
             if gam > 0:
@@ -291,13 +284,6 @@ def _ipopt(fam: Family, meas: Measure, sign: float, cons: list[Constraint], z0: 
         status, message = "iteration_limit", (f"the exchange step still found violated "
                                               f"points after {rounds} rounds")
     return z_best, status, message, used
-
-
-def _plane_task(fam: Family, m_: Any, P: np.ndarray) -> np.ndarray:
-    from .measures import _probe
-
-    mode = m_._setup(fam)[0]
-    return _probe(None, mode, m_.fixed, family=fam, z=fam.z0).task(P)
 
 
 def fam_eval(fam: Family, z: np.ndarray, T: np.ndarray, mode: Any, length: float
