@@ -14,9 +14,10 @@ trick) and Duff et al. (2019, monodromy), for the closure of any square model:
   grown by loops theta_0 -> theta_1 -> theta_2 -> theta_0 through random complex
   parameters: each loop permutes the solutions, and new endpoints are new solutions. The
   loops stop at the structure's known count when it has one (distance legs: 6, 40, 2),
-  else after ``stale`` loops in a row that found nothing (a heuristic: the trace test is
-  not implemented yet), or at ``max_loops``. Solutions are identified modulo 2 pi in
-  the real part of each angle and up to the sign of a quaternion.
+  else when, after ``stale`` loops in a row that found nothing, the trace test
+  (:mod:`optkin.solvers.trace`) shows the set complete, or at ``max_loops``. Solutions
+  are identified modulo 2 pi in the real part of each angle and up to the sign of a
+  quaternion.
 * the parameter homotopy. From theta_0 to the target (q_a, p, 0) along
   theta_0 + s(t) (theta_1 - theta_0), s(t) = gamma t / (1 + (gamma - 1) t) with a random
   complex gamma (which keeps the path away from the discriminant with probability one),
@@ -39,17 +40,20 @@ predict by a cubic Hermite extrapolation through the last two points and their t
 a numpy loop over the paths (:func:`track`).
 
 The account: every path ends finite, at infinity, singular or failed; ``complete`` only when
-none failed and no two finite nonsingular endpoints coincide (path jumping). Not yet here:
-endgames (a singular endpoint is only reported), the trace test, start systems of the
-library shipped with the package; see the issue tracker. Start systems are
-stored in the compiled-code cache directory (``.npz``, no pickles) and re-verified on
-loading (each stored solution must solve its system, nonsingular and distinct).
+none failed, no two finite nonsingular endpoints coincide (path jumping) and the start
+system is known complete (its bound reached, or the trace test passed). Not yet here:
+endgames (a singular endpoint is only reported); see the issue tracker. Start systems of
+the library's topologies ship with the package (:data:`SHIPPED`); others are stored in the
+compiled-code cache directory (``.npz``, no pickles); both are re-verified on loading
+(each stored solution must solve its system, nonsingular and distinct).
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
@@ -73,56 +77,29 @@ def _squared(e: ca.SX) -> ca.SX:
     return e
 
 
-class _System:
-    def __init__(self, model) -> None:
+class _Base:
+    """A square system H(x; theta) made complex and compiled: its value, x-Jacobian and
+    derivative along a direction of theta, evaluated over rows by :meth:`eval` (the
+    interface the trackers use)."""
+
+    def _setup(self, x: ca.SX, th: ca.SX, H: ca.SX, tag: str, scale: np.ndarray) -> None:
+        from ..model import compiled as cc
         from ..model.complexify import complexify
 
-        topo = model.topology
-        st = topo.st
-        if topo.m != topo.nx:
-            raise MechanismError(
-                f"homotopy: the closure has {topo.m} equations for {topo.nx} unknowns; the "
-                "homotopy needs a square system (use method='multistart')")
-        rows = [_squared(topo.phi_sym[i]) for i in range(topo.m)]
-        F = ca.vertcat(*rows)
-        self.n, self.na = topo.nx, topo.na
-        # only the geometry entries the closure reads are parameters (a 6-6 platform's
-        # geometry vector has 349 entries, its leg equations read 36)
-        used = np.array([i for i in range(st.p.shape[0]) if ca.depends_on(F, st.p[i])], int)
-        self.p_used = used
-        self.np_ = int(used.size)
-        c = ca.SX.sym("c", topo.m)
-        th = ca.vertcat(st.qa, *[st.p[int(i)] for i in used], c)
-        self.nth = int(th.shape[0])
+        self.n, self.nth = int(x.shape[0]), int(th.shape[0])
         dth = ca.SX.sym("dth", self.nth)
-        H = F - c
-        Jx = ca.densify(ca.jacobian(H, st.x))
+        Jx = ca.densify(ca.jacobian(H, x))
         Ht = ca.jtimes(H, th, dth)
-        f = ca.Function("homotopy", [st.x, th, dth], [ca.densify(H), Jx, ca.densify(Ht)],
+        f = ca.Function("homotopy", [x, th, dth], [ca.densify(H), Jx, ca.densify(Ht)],
                         ["x", "th", "dth"], ["H", "Jx", "Ht"])
         self.f = self.f_sx = complexify(f)
-        self.key = topo.key
-        from ..model import compiled as cc
-
-        lib = cc.library(f"homotopy:{topo.key}", [self.f])  # None: no compiler, interpreted
+        self.key = tag
+        lib = cc.library(f"homotopy:{tag}", [self.f])  # None: no compiler, interpreted
         self.compiled = lib is not None
         if lib is not None:
             self.f = lib[self.f.name()]
         self._maps: dict[int, ca.Function] = {}
-        self.scale = np.asarray(model.x_scale, dtype=float)
-        # the angles the system is 2 pi periodic in (a Khalil table's loop-angle row, a
-        # sum of angles, is not): only those are identified modulo 2 pi
-        rng = np.random.default_rng(0)
-        x = rng.normal(size=self.n) + 1j * rng.normal(size=self.n)
-        th = rng.normal(size=self.nth) + 1j * rng.normal(size=self.nth)
-        zero = np.zeros((1, self.nth), complex)
-        h0 = self.eval(x[None], th[None], zero)[0][0]
-        self.periodic = np.zeros(self.n, bool)
-        for i in np.flatnonzero(np.asarray(model.x_angle, dtype=bool)):
-            y = x.copy()
-            y[i] += 2 * np.pi
-            h1 = self.eval(y[None], th[None], zero)[0][0]
-            self.periodic[i] = bool(np.max(np.abs(h1 - h0)) <= 1e-9 * (1 + np.max(np.abs(h0))))
+        self.scale = np.asarray(scale, dtype=float)
 
     def eval(self, X: np.ndarray, TH: np.ndarray, DTH: np.ndarray):
         """H (N, n), Jx (N, n, n), Ht (N, n) at the N rows of X, TH, DTH (complex)."""
@@ -147,6 +124,42 @@ class _System:
             J = (Jr + 1j * Ji).reshape(N, n, n).transpose(0, 2, 1)[:N0]
             Ht = (Tr + 1j * Ti).reshape(N, n)[:N0]
         return H, J, Ht
+
+
+class _System(_Base):
+    def __init__(self, model) -> None:
+        topo = model.topology
+        st = topo.st
+        if topo.m != topo.nx:
+            raise MechanismError(
+                f"homotopy: the closure has {topo.m} equations for {topo.nx} unknowns; the "
+                "homotopy needs a square system (use method='multistart')")
+        rows = [_squared(topo.phi_sym[i]) for i in range(topo.m)]
+        F = ca.vertcat(*rows)
+        self.na = topo.na
+        # only the geometry entries the closure reads are parameters (a 6-6 platform's
+        # geometry vector has 349 entries, its leg equations read 36)
+        used = np.array([i for i in range(st.p.shape[0]) if ca.depends_on(F, st.p[i])], int)
+        self.p_used = used
+        self.np_ = int(used.size)
+        c = ca.SX.sym("c", topo.m)
+        th = ca.vertcat(st.qa, *[st.p[int(i)] for i in used], c)
+        #: the real system H(x, theta), for systems built on this one (the trace test's)
+        self.h_real = ca.Function("h", [st.x, th], [F - c])
+        self._setup(st.x, th, F - c, topo.key, model.x_scale)
+        # the angles the system is 2 pi periodic in (a Khalil table's loop-angle row, a
+        # sum of angles, is not): only those are identified modulo 2 pi
+        rng = np.random.default_rng(0)
+        x = rng.normal(size=self.n) + 1j * rng.normal(size=self.n)
+        th = rng.normal(size=self.nth) + 1j * rng.normal(size=self.nth)
+        zero = np.zeros((1, self.nth), complex)
+        h0 = self.eval(x[None], th[None], zero)[0][0]
+        self.periodic = np.zeros(self.n, bool)
+        for i in np.flatnonzero(np.asarray(model.x_angle, dtype=bool)):
+            y = x.copy()
+            y[i] += 2 * np.pi
+            h1 = self.eval(y[None], th[None], zero)[0][0]
+            self.periodic[i] = bool(np.max(np.abs(h1 - h0)) <= 1e-9 * (1 + np.max(np.abs(h0))))
 
 
 def _system(model) -> _System:
@@ -569,10 +582,18 @@ class StartSystem:
     solutions: np.ndarray
     loops: int
     time: float
-    #: why monodromy stopped: "bound" (the structure's known count reached), "stale"
-    #: (``stale`` loops found nothing), "max_loops" or "time" (the deadline; such a start
-    #: system is never stored or called complete)
+    #: why monodromy stopped: "bound" (the structure's known count reached), "trace"
+    #: (the trace test passed: complete), "stale" (``stale`` loops found nothing and the
+    #: trace test was not run or failed), "max_loops" or "time" (the deadline; such a
+    #: start system is never stored or called complete)
     stopped: str = "stale"
+    #: the trace test's residual (NaN: not run; see :mod:`optkin.solvers.trace`)
+    trace: float = float("nan")
+
+    @property
+    def verified(self) -> bool:
+        """Known complete: the structure's bound reached or the trace test passed."""
+        return self.stopped in ("bound", "trace")
 
     @property
     def root_count(self) -> int:
@@ -610,13 +631,15 @@ def _random_theta(sys: _System, model, rng, c: np.ndarray | None = None) -> np.n
 
 
 def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
-                 deadline: Any = None) -> StartSystem:
+                 deadline: Any = None, verify: bool = True) -> StartSystem:
     """Monodromy: one solution by construction, grown by random loops (module docstring).
 
-    Stops after ``stale`` loops in a row without a new solution, or at ``max_loops``;
-    where the structure has a known bound on the number of solutions (distance legs:
-    6, 40 or 2), reaching it stops at once and falling short of it never counts as
-    stale. ``deadline`` (an :class:`optkin.limits.Deadline`) stops it too."""
+    Where the structure has a known bound on the number of solutions (distance legs:
+    6, 40 or 2), reaching it stops at once (``stopped="bound"``). Otherwise a round ends
+    after ``stale`` loops in a row without a new solution and, with ``verify``, the
+    trace test (:func:`optkin.solvers.trace.trace_test`) decides: passed, the set is
+    complete (``stopped="trace"``); failed, another round follows, up to ``max_loops``
+    loops in all. ``deadline`` (an :class:`optkin.limits.Deadline`) stops it too."""
     bound = _enum.known_bound(model)
     t0 = time.perf_counter()
     sys = _system(model)
@@ -628,32 +651,46 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
     H, _, _ = sys.eval(x0[None, :], th[None, :], np.zeros((1, sys.nth)))
     th[-sys.n:] = H[0]  # with c = 0, H(x0) = F(x0): c0 = F(x0) makes x0 a solution
     S = _canonical(model, x0[None, :])
-    quiet = loops = 0
+    loops = 0
     out_of_time = False
-    while loops < max_loops and (bound is None or len(S) < bound) and (
-            quiet < stale or (bound is not None and len(S) < bound)):
-        if deadline is not None and deadline.expired():
-            out_of_time = True
-            break
-        loops += 1
-        th1, th2 = _random_theta(sys, model, rng), _random_theta(sys, model, rng)
-        Y = S
-        for a, b in ((th, th1), (th1, th2), (th2, th)):
-            g = np.exp(2j * np.pi * rng.uniform())
-            P = track(sys, Y, a, b, g, tracker=tr, deadline=deadline)
-            Y = P.x[P.status == "finite"]
-            if Y.size == 0:
+    trace = None
+    while True:
+        quiet = 0
+        while loops < max_loops and (bound is None or len(S) < bound) and (
+                quiet < stale or (bound is not None and len(S) < bound)):
+            if deadline is not None and deadline.expired():
+                out_of_time = True
                 break
-        new = _distinct(model, S, _canonical(model, Y)) if Y.size else np.zeros((0, sys.n))
-        if new.shape[0]:
-            S = np.vstack([S, new])
-            quiet = 0
-        else:
-            quiet += 1
+            loops += 1
+            th1, th2 = _random_theta(sys, model, rng), _random_theta(sys, model, rng)
+            Y = S
+            for a, b in ((th, th1), (th1, th2), (th2, th)):
+                g = np.exp(2j * np.pi * rng.uniform())
+                P = track(sys, Y, a, b, g, tracker=tr, deadline=deadline)
+                Y = P.x[P.status == "finite"]
+                if Y.size == 0:
+                    break
+            new = _distinct(model, S, _canonical(model, Y)) if Y.size else np.zeros((0, sys.n))
+            if new.shape[0]:
+                S = np.vstack([S, new])
+                quiet = 0
+            else:
+                quiet += 1
+        if (bound is not None or not verify or out_of_time or loops >= max_loops
+                or (deadline is not None and deadline.expired())):
+            break
+        from .trace import trace_test
+
+        trace = trace_test(model, StartSystem(th, S, loops, 0.0), seed=seed,
+                           deadline=deadline)
+        if trace.passed:
+            break
     stopped = ("time" if out_of_time or (deadline is not None and deadline.expired()) else
                "bound" if bound is not None and len(S) >= bound else
+               "trace" if trace is not None and trace.passed else
                "stale" if quiet >= stale else "max_loops")
-    return StartSystem(th, S, loops, time.perf_counter() - t0, stopped)
+    return StartSystem(th, S, loops, time.perf_counter() - t0, stopped,
+                       float("nan") if trace is None else trace.residual)
 
 
 # ---------------------------------------------------------------------------------------
@@ -661,20 +698,33 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
 # ---------------------------------------------------------------------------------------
 
 #: Part of a stored start system's name: bump when the system's form changes.
-START_VERSION = "3"
+START_VERSION = "4"
+
+#: Where the start systems of the library's topologies ship, inside the package
+#: (made by ``python -m optkin.solvers.shipped``; each re-verified on loading and,
+#: in the tests, by the trace test).
+SHIPPED = Path(__file__).resolve().parent.parent / "data" / "start"
+
+
+def _start_key(model, seed: int) -> str:
+    import hashlib
+
+    key = f"{model.topology.key}|{START_VERSION}|{int(seed)}|{structural(model)}"
+    return hashlib.sha256(key.encode()).hexdigest()[:24]
 
 
 def _start_path(model, seed: int):
-    import hashlib
-
     from ..model import compiled as cc
 
     d = cc.cache_dir()
     if d is None:
         return None
-    key = (f"{model.topology.key}|{START_VERSION}|{int(seed)}|{ca.__version__}|"
-           f"{structural(model)}")
-    return d / f"optkin_start_{hashlib.sha256(key.encode()).hexdigest()[:24]}.npz"
+    return d / f"optkin_start_{_start_key(model, seed)}.npz"
+
+
+def shipped_path(model, seed: int = 0) -> Path:
+    """Where the package keeps (or would keep) this topology's start system."""
+    return SHIPPED / f"start_{_start_key(model, seed)}.npz"
 
 
 def _verified(model, theta: np.ndarray, sols: np.ndarray) -> bool:
@@ -695,37 +745,59 @@ def _verified(model, theta: np.ndarray, sols: np.ndarray) -> bool:
     return _distinct(model, np.zeros((0, sys.n)), _canonical(model, sols)).shape[0] == n
 
 
+def _read_start(model, data: bytes) -> StartSystem | None:
+    import io
+
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            theta, sols = z["theta"], z["solutions"]
+            loops, took = int(z["loops"]), float(z["time"])
+            stopped, trace = str(z["stopped"]), float(z["trace"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if stopped in ("bound", "trace", "stale", "max_loops") and _verified(model, theta, sols):
+        return StartSystem(theta, sols, loops, took, stopped, trace)
+    return None
+
+
+def save_start(S: StartSystem, path: Path) -> None:
+    """Write ``S`` to ``path`` atomically (.npz, no pickles)."""
+    import os
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".start-", suffix=".npz")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, theta=S.theta, solutions=S.solutions, loops=S.loops, time=S.time,
+                     stopped=S.stopped, trace=S.trace)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
 def load_or_build_start(model, seed: int = 0, deadline: Any = None) -> StartSystem:
-    """The topology's start system for ``seed``: from the disk cache (beside the compiled
-    code) when a stored one verifies, else built by :func:`start_system` and stored."""
+    """The topology's start system for ``seed``: shipped with the package, or from the
+    disk cache (beside the compiled code), when one verifies; else built by
+    :func:`start_system` and stored in the cache."""
     from ..model.compiled import _read_private
 
+    shipped = shipped_path(model, seed)
+    if shipped.is_file() and shipped.stat().st_size < 1 << 26:
+        S = _read_start(model, shipped.read_bytes())
+        if S is not None:
+            return S
     path = _start_path(model, seed)
     if path is not None and path.exists():
-        try:
-            import io
-
-            with np.load(io.BytesIO(_read_private(path, 1 << 26)), allow_pickle=False) as z:
-                theta, sols = z["theta"], z["solutions"]
-                loops, took = int(z["loops"]), float(z["time"])
-                stopped = str(z["stopped"]) if "stopped" in z.files else "stale"
-            if _verified(model, theta, sols) and stopped in ("bound", "stale", "max_loops"):
-                return StartSystem(theta, sols, loops, took, stopped)
-        except (OSError, ValueError, KeyError):
-            pass
+        with contextlib.suppress(OSError, ValueError):
+            S = _read_start(model, _read_private(path, 1 << 26))
+            if S is not None:
+                return S
     S = start_system(model, seed, deadline=deadline)
     if path is not None and S.stopped != "time":
-        import os
-        import tempfile
-
-        try:
-            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".start-", suffix=".npz")
-            with os.fdopen(fd, "wb") as f:
-                np.savez(f, theta=S.theta, solutions=S.solutions, loops=S.loops, time=S.time,
-                         stopped=S.stopped)
-            os.replace(tmp, path)
-        except OSError:
-            pass
+        with contextlib.suppress(OSError):
+            save_start(S, path)
     return S
 
 
@@ -812,7 +884,10 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     bound = _enum.known_bound(model)
     short = bound is not None and start.root_count < bound  # monodromy missed some
     cut = start.stopped == "time"
-    complete = n_fail == 0 and jumped == 0 and not short and not cut and not late
+    # without a known bound, a start system is complete only by the trace test
+    unverified = not short and not cut and not start.verified
+    complete = (n_fail == 0 and jumped == 0 and not short and not cut and not late
+                and not unverified)
     account = EnumerationStats("homotopy", start.root_count, int(fin.size), n_inf,
                                int(singular.sum()), n_fail, start.root_count, complete)
     msg = (f"{len(out)} real assembly modes from {start.root_count} paths: {fin.size} "
@@ -823,12 +898,15 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
               "structure has: some modes may be missing" if short else "")
            + ("; monodromy stopped at the time limit: the start system may be incomplete"
               if cut else "")
+           + (f"; the start system's {start.root_count} solutions are not verified complete "
+              f"(trace test residual {start.trace:.1e}): some modes may be missing"
+              if unverified else "")
            + (f"; tracking stopped at the time limit of {budget:g} s" if late else ""))
     status = "iteration_limit" if late or cut else "optimal" if out else "infeasible"
     info = {"success": bool(out) and not (late or cut), "status": status,
             "message": msg, "complete": complete, "root_count": start.root_count,
             "monodromy_loops": start.loops, "start_time": start.time, "gamma_tries": tries,
-            "monodromy_stopped": start.stopped,
+            "monodromy_stopped": start.stopped, "trace": start.trace,
             "time": time.perf_counter() - t0, "method": "homotopy"}
     return SolutionSet(out, "assembly modes", info, seed=int(seed), dimension=None,
                        stats=account)

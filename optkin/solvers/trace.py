@@ -1,0 +1,268 @@
+"""The trace test: is a start system's solution set complete?
+
+Monodromy grows a solution set but cannot say when it has everything. The trace test can
+(Sommese, Verschelde and Wampler 2002; Leykin, Rodriguez and Sottile, "Trace test",
+Arnold Math. J. 4, 2018). This is the construction HomotopyContinuation.jl's
+``verify_solution_completeness`` uses, written for optkin's systems:
+
+For the start system's solutions S of H(x; theta_0) = 0, take a random direction v in the
+offset c of the parameters (theta = (q_a, p, c), H = F(x; q_a, p) - c: along c the curve
+below is algebraic; along a geometry angle, entering by its cosine, it is not, and the
+witnesses never end) and a random linear form a on the algebraic coordinates y(x) of the unknowns
+(cos and sin of each periodic angle, the other unknowns as they are), and the system in
+(x, lam) with the parameter t::
+
+    G(x, lam; t) = [ H(x; theta_0 + lam v) ;  (a . y(x) - 1) lam + t ].
+
+At t = 0 its solutions are S x {lam = 0} and the *witnesses* W: the points of the curve
+C = {(x, lam): H(x; theta_0 + lam v) = 0} on the hyperplane a . y = 1. For t != 0 both
+sets move together on C, cut by the hypersurface (a . y - 1) lam = -t; the sum of the
+coordinates (y, lam) over all of S and W is then an affine function of t when, and in
+general only when, S and W are complete. W is found by monodromy (its own loops over
+theta_0, v and a at t = 0, started from points of C made by construction), then
+all of S and W are tracked to t = g/2 and t = g for a random complex g, and the three
+sums T(0), T(g/2), T(g) are tested for collinearity: the ratio of the smallest to the
+largest singular value of [[T(0), T(g/2), T(g)], [1, 1, 1]] (0 when complete).
+
+A start system whose solutions are complete passes; one missing a solution fails (tests
+drop one). A spatial platform's unit quaternion q and -q are one rotation, and the start
+system keeps one of them: the test sums both. An angle the system is not periodic in
+enters y(x) as it is (then the test is a heuristic: the system is not algebraic in it).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ..model import enumeration as _enum
+from . import homotopy as _hom
+
+__all__ = ["TraceResult", "trace_test"]
+
+#: The trace test passes when sigma_3 / sigma_1 of the trace matrix is at most this.
+TRACE_TOL = 1e-6
+
+
+@dataclass
+class TraceResult:
+    """The outcome of :func:`trace_test`.
+
+    Attributes
+    ----------
+    passed : bool
+        The traces are collinear (``residual <= tol``): the solution set is complete.
+    residual : float
+        sigma_3 / sigma_1 of [[T(0), T(g/2), T(g)], [1, 1, 1]]; NaN when a path failed.
+    tol : float
+    solutions : int
+        The solutions tested (a spatial platform's counted with both quaternion signs).
+    witnesses : int
+        The points of the auxiliary curve on the hyperplane, found by monodromy.
+    loops : int
+        The monodromy loops that found them.
+    time : float
+        Seconds.
+    message : str
+    """
+
+    passed: bool
+    residual: float
+    tol: float
+    solutions: int
+    witnesses: int
+    loops: int
+    time: float
+    message: str
+
+
+class _TraceSystem(_hom._Base):
+    """G(x, lam; t, theta, v, a) of the module docstring, complex and compiled."""
+
+    def __init__(self, model) -> None:
+        base = _hom._system(model)
+        n, nth = base.n, base.nth
+        x = ca.SX.sym("x", n)
+        lam = ca.SX.sym("lam")
+        t = ca.SX.sym("t")
+        th = ca.SX.sym("th", nth)
+        v = ca.SX.sym("v", nth)
+        self.base = base
+        self.per = np.asarray(base.periodic, dtype=bool)
+        y = self.coords_sym(x)
+        self.k = int(y.shape[0])
+        a = ca.SX.sym("a", self.k)
+        G = ca.vertcat(base.h_real(x, th + lam * v), (ca.dot(a, y) - 1) * lam + t)
+        self.y_fun = ca.Function("y", [x], [y])
+        scale = np.concatenate([base.scale, [1.0]])
+        self._setup(ca.vertcat(x, lam), ca.vertcat(t, th, v, a), G,
+                    f"trace:{base.key}", scale)
+
+    def coords_sym(self, x):
+        out = []
+        for i in range(x.shape[0]):
+            out += [ca.cos(x[i]), ca.sin(x[i])] if self.per[i] else [x[i]]
+        return ca.vertcat(*out)
+
+    def coords(self, X: np.ndarray) -> np.ndarray:
+        """The algebraic coordinates y(x) of the rows of X (complex)."""
+        cols = []
+        for i in range(X.shape[1]):
+            cols += [np.cos(X[:, i]), np.sin(X[:, i])] if self.per[i] else [X[:, i]]
+        return np.stack(cols, axis=1)
+
+
+def _trace_system(model) -> _TraceSystem:
+    return model.topology.cached("homotopy:trace", lambda: _TraceSystem(model))
+
+
+def _trace_tracker(model, tsys: _TraceSystem):
+    def build():
+        if not tsys.compiled:
+            return None
+        tr = _hom._Tracker(tsys, sx=False)  # MX: compiled in seconds, not a minute
+        return tr if tr.compiled else None
+
+    return model.topology.cached("homotopy:trace_tracker", build)
+
+
+def _expand(model, S: np.ndarray) -> np.ndarray:
+    """S with a spatial platform's quaternions in both signs (the whole fibre)."""
+    q = np.asarray(_enum.layout(model).quat, dtype=int)
+    if q.size != 4 or not len(S):
+        return S
+    T = S.copy()
+    T[:, q] = -T[:, q]
+    return np.vstack([S, T])
+
+
+def _canon_w(tsys: _TraceSystem, Y: np.ndarray) -> np.ndarray:
+    Y = Y.copy()
+    ang = np.flatnonzero(tsys.per)
+    if ang.size:
+        Y[:, ang] = (np.mod(Y[:, ang].real + np.pi, 2 * np.pi) - np.pi) + 1j * Y[:, ang].imag
+    return Y
+
+
+def _new_rows(S: np.ndarray, Y: np.ndarray, sc: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """Rows of Y not within tol (scaled) of a row of S or an earlier row of Y."""
+    out: list[np.ndarray] = []
+    for y in Y:
+        pool = [S] + ([np.asarray(out)] if out else [])
+        P = np.vstack(pool) if len(S) or out else np.zeros((0, Y.shape[1]), complex)
+        if len(P) == 0 or np.min(np.max(np.abs(P - y) / sc, axis=1)) > tol:
+            out.append(y)
+    return np.asarray(out).reshape(-1, Y.shape[1])
+
+
+def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int = 200,
+               tol: float = TRACE_TOL, deadline: Any = None) -> TraceResult:
+    """Test whether ``start`` (a :class:`~optkin.solvers.homotopy.StartSystem` of
+    ``model``'s topology) holds every solution of its system (module docstring).
+
+    ``stale`` monodromy loops in a row without a new witness end a round; the trace is
+    then computed, and a round that fails the test is followed by another (up to
+    ``max_loops`` loops), since the witnesses may be the incomplete set."""
+    t0 = time.perf_counter()
+    base = _hom._system(model)
+    tsys = _trace_system(model)
+    tr_b = _hom._tracker(model)
+    tr = _trace_tracker(model, tsys)
+    rng = np.random.default_rng([int(seed), 17])
+    n, k = base.n, tsys.k
+    S = _expand(model, np.asarray(start.solutions, dtype=complex))
+    th0 = np.asarray(start.theta, dtype=complex)
+    size = float(np.max(base.scale))
+    ysc = max(1.0, size)
+
+    def fail(msg: str, W: int = 0, loops: int = 0) -> TraceResult:
+        return TraceResult(False, float("nan"), tol, len(S), W, loops,
+                           time.perf_counter() - t0, msg)
+
+    # points of the curve by construction: some solutions tracked to theta_0 + v, and a
+    # linear form a through them (a . y = 1)
+    def along_c(d: np.ndarray) -> np.ndarray:
+        out = np.zeros_like(d)
+        out[-n:] = d[-n:]
+        return out
+
+    th_q = th0 + along_c(_hom._random_theta(base, model, rng) - th0)
+    P = _hom.track(base, S[:min(k, len(S))], th0, th_q, np.exp(2j * np.pi * rng.uniform()),
+                   tracker=tr_b, deadline=deadline)
+    Xq = P.x[P.status == "finite"]
+    if not len(Xq):
+        return fail("no path from the start system reached the auxiliary parameters")
+    Yq = tsys.coords(Xq)
+    a0 = np.linalg.lstsq(Yq, np.ones(len(Yq), complex), rcond=None)[0]
+    TH0 = np.concatenate([[0.0], th0, along_c(th_q - th0), a0])
+    W = _canon_w(tsys, np.hstack([Xq, np.ones((len(Xq), 1))]))
+    W = _new_rows(np.zeros((0, n + 1), complex), W, tsys.scale)
+
+    def random_params() -> np.ndarray:
+        th = _hom._random_theta(base, model, rng)
+        v = along_c(_hom._random_theta(base, model, rng) - th)
+        a = (rng.normal(size=k) + 1j * rng.normal(size=k)) / (ysc * np.sqrt(k))
+        return np.concatenate([[0.0], th, v, a])
+
+    def sums(Y: np.ndarray) -> np.ndarray:
+        return np.concatenate([tsys.coords(Y[:, :n]).sum(axis=0), [Y[:, n].sum()]])
+
+    loops = 0
+    residual = float("nan")
+    while loops < max_loops:
+        quiet = 0
+        while quiet < stale and loops < max_loops:  # a monodromy round for the witnesses
+            if deadline is not None and deadline.expired():
+                return fail("stopped at the time limit", len(W), loops)
+            loops += 1
+            p1, p2 = random_params(), random_params()
+            Y = W
+            for a, b in ((TH0, p1), (p1, p2), (p2, TH0)):
+                Q = _hom.track(tsys, Y, a, b, np.exp(2j * np.pi * rng.uniform()),
+                               tracker=tr, deadline=deadline)
+                Y = Q.x[Q.status == "finite"]
+                if not len(Y):
+                    break
+            if len(Y):  # on the witness component only: lam != 0 (a path may jump
+                # onto the other, lam = 0, where the start system's solutions lie)
+                Y = Y[np.abs(Y[:, n]) > 1e-6 * (1 + np.abs(Y[:, n]).max())]
+            new = _new_rows(W, _canon_w(tsys, Y), tsys.scale) if len(Y) else Y[:0]
+            if len(new):
+                W = np.vstack([W, new])
+                quiet = 0
+            else:
+                quiet += 1
+        # the trace at t = 0, g/2, g
+        Y0 = np.vstack([np.hstack([S, np.zeros((len(S), 1))]), W])
+        T = [sums(Y0)]
+        g = np.exp(2j * np.pi * rng.uniform())
+        ok = True
+        for tt in (0.5 * g, g):
+            TH1 = TH0.copy()
+            TH1[0] = tt
+            for _ in range(_hom.TRIES):
+                Q = _hom.track(tsys, Y0, TH0, TH1, np.exp(2j * np.pi * rng.uniform()),
+                               tracker=tr, deadline=deadline)
+                if np.all(Q.status == "finite"):
+                    break
+            if not np.all(Q.status == "finite"):
+                ok = False
+                break
+            T.append(sums(Q.x))
+        if ok:
+            M = np.vstack([np.stack(T, axis=1), np.ones((1, 3))])
+            sv = np.linalg.svd(M, compute_uv=False)
+            residual = float(sv[2] / sv[0])
+            if residual <= tol:
+                return TraceResult(
+                    True, residual, tol, len(S), len(W), loops, time.perf_counter() - t0,
+                    f"trace test passed: {len(S)} solutions complete (trace residual "
+                    f"{residual:.1e}, {len(W)} witnesses, {loops} loops)")
+    return TraceResult(False, residual, tol, len(S), len(W), loops, time.perf_counter() - t0,
+                       f"trace test failed: residual {residual:.1e} > {tol:g} after "
+                       f"{loops} loops ({len(W)} witnesses): the solution set (or the "
+                       "witness set) is incomplete")

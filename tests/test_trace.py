@@ -1,0 +1,80 @@
+"""The trace test (optkin.solvers.trace) and the start systems shipped with the package.
+
+Evidence: a start system known complete by a closed form (the 3-RPR's six solutions, the
+structure's bound; the four-bar's two circle intersections) passes; the same set with one
+solution dropped fails. Every shipped start system loads without a rebuild, and passes the
+trace test here, in the test, not only when it was made."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import optkin
+from optkin.model import get_model
+from optkin.solvers import homotopy as H
+from optkin.solvers.shipped import CATALOGUE
+from optkin.solvers.trace import trace_test
+
+
+def _rpr3():
+    return optkin.mechanisms.rpr3([[0.3, 0.2], [7.1, -0.5], [2.9, 6.2]],
+                                  [[-0.8, -0.4], [1.1, -0.7], [0.3, 1.2]])
+
+
+def test_trace_passes_on_a_complete_set_and_fails_without_one_solution():
+    model = get_model(_rpr3())
+    S = H.start_system(model, seed=5)
+    assert S.stopped == "bound" and S.root_count == 6  # the sextic's six
+    ok = trace_test(model, S, seed=1)
+    assert ok.passed and ok.residual < 1e-9, ok.message
+    for drop in (0, 3):
+        short = dataclasses.replace(S, solutions=np.delete(S.solutions, drop, axis=0))
+        bad = trace_test(model, short, seed=1, max_loops=20)
+        assert not bad.passed, bad.message
+        assert not np.isfinite(bad.residual) or bad.residual > 1e-4
+
+
+def test_four_bar_start_system_is_complete_by_the_trace_test():
+    """A Khalil table has no known bound: monodromy stops when the trace test passes, and
+    the count is the closed form's (two circle intersections)."""
+    model = get_model(optkin.mechanisms.four_bar(1.0, 0.45, 1.15, 0.85))
+    S = H.start_system(model, seed=3)
+    assert S.stopped == "trace" and S.root_count == 2 and S.trace <= 1e-6
+    bad = trace_test(model, dataclasses.replace(S, solutions=S.solutions[:1]), max_loops=20)
+    assert not bad.passed
+
+
+def test_an_unverified_start_system_is_never_complete():
+    m = optkin.mechanisms.four_bar(1.0, 0.45, 1.15, 0.85)
+    model = get_model(m)
+    S = dataclasses.replace(H.start_system(model, seed=3), stopped="stale")
+    modes = H.homotopy_modes(m, [1.5], start=S)
+    assert len(modes) == 2 and not modes.complete
+    assert "not verified complete" in modes.info["message"]
+
+
+@pytest.mark.parametrize("name,make", [pytest.param(n, mk, id=n, marks=[pytest.mark.slow]
+                                                    if slow else [])
+                                       for n, mk, slow in CATALOGUE])
+def test_shipped_start_systems_load_and_pass_the_trace_test(name, make, monkeypatch, tmp_path):
+    model = get_model(make())
+    path = H.shipped_path(model)
+    assert path.is_file(), f"{name}: no shipped start system (python -m optkin.solvers.shipped)"
+    assert path.stat().st_size < 200_000
+    S = H._read_start(model, path.read_bytes())
+    assert S is not None and S.verified, name
+
+    # used as shipped: no monodromy in a process with an empty cache
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+
+    def refuse(*a, **k):
+        raise AssertionError("the shipped start system was not used")
+
+    monkeypatch.setattr(H, "start_system", refuse)
+    loaded = H.load_or_build_start(model)
+    assert np.array_equal(loaded.theta, S.theta)
+    T = trace_test(model, S, seed=2)
+    assert T.passed, f"{name}: {T.message}"
