@@ -142,7 +142,11 @@ ASSEMBLY_DEFAULTS: dict[str, Any] = {
     "rescue": 8,  # IPOPT rescues of stalled starts
     "certify": False,  # prove each mode by Krawczyk's test (optkin.solvers.certify)
     "continua": True,  # look for solutions that are not isolated (optkin.solvers.continua)
-    "method": "multistart",  # or "homotopy": parameter homotopy (optkin.solvers.homotopy)
+    "method": "auto",  # "homotopy": parameter homotopy (optkin.solvers.homotopy);
+    # "multistart"; "auto": the homotopy where the package ships the topology's start system
+    # and no multistart option is given, kept when it finds a mode, its account is complete
+    # and no endpoint is singular (else the multistart: it also reports continua, and why
+    # no mode exists)
     "jit": "auto",  # compile the step to C: True (wait for the compiler), False, "cached" (if
     # in the disk cache), "auto" ("cached" under 6 unknowns, else compiled in the background
     # while the first calls use the interpreted step)
@@ -578,6 +582,26 @@ def _opt_auto(opts: dict[str, Any], key: str, where: str, conv) -> Any:
     return conv(v)
 
 
+#: Options only the multistart reads: giving one selects it under ``method="auto"``.
+_MULTISTART_ONLY = ("starts", "min_starts", "target", "target_upper", "bound", "width",
+                    "max_iter", "step_max", "dedup_tol", "rescue", "jit", "threads",
+                    "continua")
+
+
+def _homotopy_ready(model: Model, given: dict[str, Any]) -> bool:
+    """``method="auto"`` takes the homotopy: the package ships this topology's start
+    system (a deterministic choice: never the state of a cache) and no option of the
+    multistart was given."""
+    if any(k in given for k in _MULTISTART_ONLY) or model.m != model.nx:
+        return False
+    from .homotopy import shipped_path
+
+    try:
+        return shipped_path(model).is_file()
+    except MechanismError:
+        return False
+
+
 def _assembly_options(opts: dict[str, Any], model: Model, given_time: bool = True
                       ) -> dict[str, Any]:
     """Every option of assembly_modes converted and checked (MechanismError naming it); the
@@ -632,9 +656,9 @@ def _assembly_options(opts: dict[str, Any], model: Model, given_time: bool = Tru
         raise MechanismError(f"{w}: option continua must be True or False, got "
                              f"{show(opts['continua'])}")
     o["continua"] = bool(opts["continua"])
-    if opts["method"] not in ("multistart", "homotopy"):
-        raise MechanismError(f"{w}: option method must be 'multistart' or 'homotopy', got "
-                             f"{show(opts['method'])}")
+    if opts["method"] not in ("auto", "multistart", "homotopy"):
+        raise MechanismError(f"{w}: option method must be 'auto', 'multistart' or "
+                             f"'homotopy', got {show(opts['method'])}")
     o["method"] = opts["method"]
     j = opts["jit"]
     if isinstance(j, (bool, np.bool_)):
@@ -880,17 +904,26 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     _check_size_of(model, "assembly_modes")
     qa = _qa_arg(model, qa)
     o = _assembly_options(opts, model, "time_limit" in options)
-    if o["method"] == "homotopy":
+    method = o["method"]
+    tried = None
+    if method == "auto":
+        method = "homotopy" if _homotopy_ready(model, options) else "multistart"
+    if method == "homotopy":
         checkpoint()
         from .homotopy import homotopy_modes
 
         modes = homotopy_modes(mech, qa, seed=int(seed), tol=o["tol"],
                                time_limit=o["time_limit"])
-        if o["certify"] and len(modes):
-            from .certify import stamp
+        if o["method"] == "auto" and not (len(modes) and modes.complete
+                                          and modes.stats.singular == 0
+                                          and modes.info["status"] != "iteration_limit"):
+            tried = modes.info["message"]  # the multistart accounts for it (and continua)
+        else:
+            if o["certify"] and len(modes):
+                from .certify import stamp
 
-            modes.info["certified"] = stamp(model, qa, modes)
-        return modes
+                modes.info["certified"] = stamp(model, qa, modes)
+            return modes
     t_start = timer()
     tol = o["tol"]
     nx = model.nx
@@ -932,6 +965,8 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
 
     starts = _Starts(model, qa, int(seed), width, jit)
     info: dict[str, Any] = {"bound": bound, "width": width}
+    if tried is not None:  # method="auto": why the homotopy's answer was not kept
+        info["homotopy"] = tried
     if starts.empty_reason is not None:
         info.update({"success": False, "status": "infeasible",
                      "message": _NO_MODE + starts.empty_reason, "starts": 0,

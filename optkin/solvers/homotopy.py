@@ -759,9 +759,10 @@ def _start_path(model, seed: int):
     return d / f"optkin_start_{_start_key(model, seed)}.npz"
 
 
-def shipped_path(model, seed: int = 0) -> Path:
-    """Where the package keeps (or would keep) this topology's start system."""
-    return SHIPPED / f"start_{_start_key(model, seed)}.npz"
+def shipped_path(model) -> Path:
+    """Where the package keeps (or would keep) this topology's start system (built with
+    seed 0, used for every seed: the seed then picks the gamma paths)."""
+    return SHIPPED / f"start_{_start_key(model, 0)}.npz"
 
 
 def _verified(model, theta: np.ndarray, sols: np.ndarray) -> bool:
@@ -815,12 +816,12 @@ def save_start(S: StartSystem, path: Path) -> None:
 
 
 def load_or_build_start(model, seed: int = 0, deadline: Any = None) -> StartSystem:
-    """The topology's start system for ``seed``: shipped with the package, or from the
+    """The topology's start system: shipped with the package, or for ``seed`` from the
     disk cache (beside the compiled code), when one verifies; else built by
     :func:`start_system` and stored in the cache."""
     from ..model.compiled import _read_private
 
-    shipped = shipped_path(model, seed)
+    shipped = shipped_path(model)  # one per topology, whatever the seed
     if shipped.is_file() and shipped.stat().st_size < 1 << 26:
         S = _read_start(model, shipped.read_bytes())
         if S is not None:
@@ -942,6 +943,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     status = "iteration_limit" if late or cut else "optimal" if out else "infeasible"
     info = {"success": bool(out) and not (late or cut), "status": status,
             "message": msg, "complete": complete, "root_count": start.root_count,
+            "bound": bound,
             "monodromy_loops": start.loops, "start_time": start.time, "gamma_tries": tries,
             "monodromy_stopped": start.stopped, "trace": start.trace,
             "time": time.perf_counter() - t0, "method": "homotopy"}

@@ -106,7 +106,7 @@ def ship(names: list[str] | None = None, out=sys.stdout) -> None:
                 print(f"{name}: not shipped, {T.message}", file=out)
                 continue
             S.trace = T.residual
-        path = H.shipped_path(model, 0)
+        path = H.shipped_path(model)
         H.save_start(S, path)
         path.chmod(0o644)  # package data: readable by all (the cache's files are private)
         print(f"{name}: {S.root_count} solutions ({S.stopped}), trace residual "
