@@ -903,19 +903,25 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     seen: list[np.ndarray] = []
     ang = np.asarray(model.x_angle, dtype=bool)
     for x in Xf[real & ~singular].real:
-        x1, _, nit, ok = newton(model, qa, x, tol, 8)
-        if not ok:
-            continue
-        x1 = model.canonical_x(x1)
+        # polished at the target already: the real part usually closes the real model to
+        # round-off (its Newton steps only where it does not)
+        x1 = model.canonical_x(x)
         if seen:  # the same mode? (angles compared modulo 2 pi: pi and -pi are one)
             dif = np.abs(np.asarray(seen) - x1)
             dif[:, ang] = np.abs(np.mod(dif[:, ang] + np.pi, 2 * np.pi) - np.pi)
             if np.min(np.max(dif / sc, axis=1)) < 1e-6:
                 continue
-        seen.append(x1)
         stats = SolverStats("parameter-homotopy", start.time, time.perf_counter() - t_start,
-                            nit, "converged", {"paths": start.root_count})
-        out.append(make_result(model, qa, x1, tol, nit, stats))
+                            0, "converged", {"paths": start.root_count})
+        r = make_result(model, qa, x1, tol, 0, stats)
+        if not (r.success and r.residual <= 1e-3 * tol):
+            x2, _, nit, ok = newton(model, qa, x, tol, 8)
+            if not ok:
+                continue
+            x1 = model.canonical_x(x2)
+            r = make_result(model, qa, x1, tol, nit, stats)
+        seen.append(x1)
+        out.append(r)
     out.sort(key=lambda r: tuple(np.round(r.x / sc, 9)))
     n_fail = int(np.sum(P.status == "failed"))
     n_inf = int(np.sum(P.status == "at_infinity"))
