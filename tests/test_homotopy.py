@@ -52,6 +52,36 @@ def test_3rpr_random_instances_match_the_elimination():
     assert done >= 195
 
 
+def test_3rrr_random_instances_match_the_elimination():
+    """A 3-RRR at fixed actuated angles is a 3-RPR whose base points are the elbows
+    C_i = A_i + l_i (cos q_i, sin q_i) and whose legs are the distal lengths: its modes
+    are that sextic's real roots. (Randomising the unit entries of the legs' joint axes
+    had left the rigid family: monodromy found 2-3 of the 6 start solutions.)"""
+    rng = np.random.default_rng(5)
+    done = 0
+    for trial in range(40):
+        a, b = rng.uniform(-10, 10, (3, 2)), rng.uniform(-3, 3, (3, 2))
+        x = np.array([*rng.uniform(-3, 3, 2), rng.uniform(-np.pi, np.pi)])
+        P = x[:2] + (_rot2(x[2]) @ b.T).T
+        d = np.linalg.norm(P - a, axis=1)
+        prox = d * rng.uniform(0.4, 0.6, 3)  # proximal and distal links that reach P
+        dist = d * rng.uniform(0.6, 0.9, 3)
+        m = optkin.mechanisms.rrr3(a, b, prox, dist)
+        inv = optkin.inverse(m, x)
+        if not len(inv):
+            continue
+        q = inv[0].qa
+        C = a + prox[:, None] * np.c_[np.cos(q), np.sin(q)]
+        ref, ambiguous = rpr_reference(C, b, dist)
+        if ambiguous:
+            continue
+        modes = optkin.assembly_modes(m, q, method="homotopy")
+        assert modes.stats.root_count == 6 and modes.complete, modes.info["message"]
+        assert _matches([r.x for r in modes], ref), (trial, len(modes), len(ref))
+        done += 1
+    assert done >= 30
+
+
 def test_compiled_tracker_follows_the_python_loop():
     """The compiled tracker (CHUNK steps per call, mapped over the paths) and the Python
     loop of track() are two writings of one method: same steps, same endpoints."""

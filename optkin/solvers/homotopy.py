@@ -642,14 +642,16 @@ class StartSystem:
 
 def structural(model) -> tuple[tuple[int, float], ...]:
     """The geometry entries (positions in the homotopy's parameters) taken to define the
-    family rather than vary within it: those equal to 0, +-pi/2 or +-pi. In a Khalil
+    family rather than vary within it: those equal to 0, +-1, +-pi/2 or +-pi. In a Khalil
     table they are parallel or perpendicular axes and zero offsets (a planar loop stays
     planar only with them: randomised, the four-bar's start system was a spatial loop's,
-    and 6 of its 8 paths failed). They stay fixed, real, in the start system, which is
+    and 6 of its 8 paths failed); in joint chains, the unit entries of joint axes (a
+    3-RRR's randomised z axes left the rigid family: its solutions lay at |x| ~ 1e5 and
+    monodromy found 2-3 of the 6). They stay fixed, real, in the start system, which is
     built and stored per pattern; a geometry with another pattern gets its own."""
     sys = _system(model)
     p = np.asarray(model.p, dtype=float)[sys.p_used]
-    special = np.array([0.0, np.pi / 2, -np.pi / 2, np.pi, -np.pi])
+    special = np.array([0.0, np.pi / 2, -np.pi / 2, np.pi, -np.pi, 1.0, -1.0])
     hit = np.abs(p[:, None] - special[None, :]) <= 1e-12
     rows = np.flatnonzero(hit.any(axis=1))
     return tuple((sys.na + int(k), float(special[np.argmax(hit[k])])) for k in rows)
@@ -735,7 +737,7 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
 # ---------------------------------------------------------------------------------------
 
 #: Part of a stored start system's name: bump when the system's form changes.
-START_VERSION = "4"
+START_VERSION = "5"
 
 #: Where the start systems of the library's topologies ship, inside the package
 #: (made by ``python -m optkin.solvers.shipped``; each re-verified on loading and,
@@ -877,27 +879,34 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     target = np.concatenate([qa, np.asarray(model.p, dtype=float)[sys.p_used],
                              np.zeros(sys.n)]).astype(complex)
     rng = np.random.default_rng([int(seed), 11])
+    sc = sys.scale
+
+    def account(Q):  # (finite indices, canonical endpoints, singular, path jumps, bad)
+        fin = np.flatnonzero(Q.status == "finite")
+        Xf = _canonical(model, Q.x[fin])
+        singular = Q.cond[fin] > 1e10
+        ns = Xf[~singular]  # path jumping: two nonsingular endpoints at one point
+        jumped = ns.shape[0] - _distinct(model, np.zeros((0, sys.n)), ns, 1e-8).shape[0]
+        return fin, Xf, singular, jumped, int(np.sum(Q.status == "failed")) + jumped
+
     # every path along one gamma path (which start goes to which end depends on it); a
-    # path that fails (one that swings far out near parameters where a solution goes to
-    # infinity) sends all of them along another gamma, up to ``tries`` times
-    P, tries = None, 0
+    # failed path (one that swings far out near parameters where a solution goes to
+    # infinity) or two paths ending at one point (a jump) send all of them along another
+    # gamma, up to ``TRIES`` times; the best account is kept
+    P = acc = None
+    tries = 0
     while tries < TRIES:
         tries += 1
         gamma = np.exp(2j * np.pi * rng.uniform())
         Q = track(sys, start.solutions, start.theta, target, gamma, tracker=tr,
                   deadline=deadline)
-        if P is None or np.sum(Q.status == "failed") < np.sum(P.status == "failed"):
-            P = Q
-        if not np.any(P.status == "failed") or deadline.expired():
+        a = account(Q)
+        if P is None or a[4] < acc[4]:
+            P, acc = Q, a
+        if acc[4] == 0 or deadline.expired():
             break
     late = deadline.expired() and bool(np.any(P.status == "failed"))  # paths cut short
-    sc = sys.scale
-    fin = np.flatnonzero(P.status == "finite")
-    Xf = _canonical(model, P.x[fin])
-    singular = P.cond[fin] > 1e10
-    # path jumping: two nonsingular endpoints at one point
-    ns = Xf[~singular]
-    jumped = ns.shape[0] - _distinct(model, np.zeros((0, sys.n)), ns, 1e-8).shape[0]
+    fin, Xf, singular, jumped, _ = acc
     real = np.max(np.abs(Xf.imag) / sc, axis=1) < 1e-6
     out: list[KinResult] = []
     seen: list[np.ndarray] = []

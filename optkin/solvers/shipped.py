@@ -5,10 +5,7 @@ entries (:func:`optkin.solvers.homotopy.structural`: entries equal to 0, +-pi/2 
 stay fixed). :data:`CATALOGUE` lists one representative mechanism per shipped topology
 and pattern: the library's planar and spatial platforms with generic geometry (no
 structural zeros), and the library constructors whose own geometry fixes the pattern
-(five-bar, four-bar and the Khalil tables, the Delta). Not the 3-RRR: its legs' joint
-axes are geometry entries, randomised independently they leave the rigid family, whose
-solutions then lie far out (|x| ~ 1e5) and monodromy finds 2 or 3 of the 6. A user's
-mechanism of the same
+(five-bar, four-bar and the Khalil tables, the Delta). A user's mechanism of the same
 topology and pattern uses the shipped file; any other builds its own by monodromy on the
 first call (stored in the compiled-code cache).
 
@@ -37,6 +34,13 @@ def _generic_rpr3():
 
     return M.rpr3([[0.1, 0.2], [10.3, -0.4], [4.1, 8.7]],
                   [[-1.1, -0.6], [1.3, -0.9], [0.2, 1.4]])
+
+
+def _generic_rrr3():
+    from .. import mechanisms as M
+
+    return M.rrr3([[0.1, 0.2], [10.3, -0.4], [4.1, 8.7]],
+                  [[-1.1, -0.6], [1.3, -0.9], [0.2, 1.4]], [4.2, 4.9, 4.4], [5.1, 4.7, 5.3])
 
 
 def _generic_prr3():
@@ -72,6 +76,7 @@ def _lib(name: str, *args) -> Callable:
 #: ``slow`` ones take more than a few seconds to re-verify by the trace test.
 CATALOGUE: list[tuple[str, Callable, bool]] = [
     ("rpr3", _generic_rpr3, False),
+    ("rrr3", _generic_rrr3, False),
     ("prr3", _generic_prr3, False),
     ("five_bar", _lib("five_bar", 1.3, 0.8, 1.1, 0.9, 0.7), False),
     ("four_bar", _lib("four_bar", 1.0, 0.4, 1.2, 0.9), False),
