@@ -117,13 +117,17 @@ def local_dimension(model, qa: np.ndarray, x: np.ndarray, tol: float,
     for v in N[:8]:
         for sign in (1.0, -1.0):
             y, _, ok = project(model, qa, x + sign * h * v * scale, tol)
-            if ok and float(np.linalg.norm((y - x) / scale)) > 0.5 * h:
-                moves.append((y - x) / scale / h)  # on the set, about h away
+            d = float(np.linalg.norm((y - x) / scale))
+            if ok and d > 0.1 * h:  # on the set, away from x: a direction of the set
+                moves.append((y - x) / scale / d)
             # (back at x: an isolated multiple root in that direction; or not closed)
+            # A null direction only to first order (a Gosselin-Angeles platform's rotation
+            # about its legs) is projected back onto the set's tangent: the moves, made unit,
+            # span the directions the set extends in, whatever the null-space basis
     if not moves:
         return 0
     sv = np.linalg.svd(np.array(moves), compute_uv=False)
-    return int(np.sum(sv > 0.2 * sv[0]))  # the directions the set extends in
+    return int(np.sum(sv > 0.2 * sv[0]))
 
 
 def group(model, qa: np.ndarray, xs: list[np.ndarray], tol: float,
