@@ -108,7 +108,7 @@ def test_continua_option_is_validated():
 
 def test_the_account_is_typed_and_adds_up():
     m = optkin.mechanisms.rpr3([[0, 0], [1, 0], [0.3, 0.9]], [[0, 0], [0.25, 0], [0.1, 0.2]])
-    modes = optkin.assembly_modes(m, [0.6, 0.7, 0.65])
+    modes = optkin.assembly_modes(m, [0.6, 0.7, 0.65], method="multistart")
     st = modes.stats
     assert isinstance(st, optkin.results.EnumerationStats) and st.method == "multistart"
     assert st.paths == modes.info["starts"] and st.finite == modes.info["converged"]

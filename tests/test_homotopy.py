@@ -52,6 +52,47 @@ def test_3rpr_random_instances_match_the_elimination():
     assert done >= 195
 
 
+def test_special_3rpr_geometries_start_from_the_wider_family():
+    """A 3-RPR with the first base and platform points at the origin and the second on
+    the x axis (the textbook frames: zeros no shipped start system has) starts from the
+    shipped generic 3-RPR's start system, and its modes are the sextic's real roots."""
+    rng = np.random.default_rng(8)
+    done = 0
+    for trial in range(40):
+        a = np.array([[0, 0], [rng.uniform(5, 10), 0], rng.uniform(-10, 10, 2)])
+        b = np.array([[0, 0], [rng.uniform(1, 4), 0], rng.uniform(-4, 4, 2)])
+        x = np.array([*rng.uniform(-3, 3, 2), rng.uniform(-np.pi, np.pi)])
+        s = np.linalg.norm(x[:2] + (_rot2(x[2]) @ b.T).T - a, axis=1)
+        ref, ambiguous = rpr_reference(a, b, s)
+        if ambiguous:
+            continue
+        m = optkin.mechanisms.rpr3(a, b)
+        assert H.structural(get_model(m))  # special: its own pattern
+        modes = optkin.assembly_modes(m, s)
+        assert modes.stats.method == "homotopy" and modes.info["start_pattern"] == "wider"
+        assert modes.complete and _matches([r.x for r in modes], ref), (trial, len(ref))
+        done += 1
+    assert done >= 36
+
+
+def test_failing_wider_start_builds_the_patterns_own(monkeypatch, tmp_path):
+    """When the paths from the wider family's start system fail, the pattern's own start
+    system is built by monodromy and the paths tracked from it."""
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+    a, b = np.array([[0, 0], [8, 0], [3, 7.0]]), np.array([[0, 0], [2, 0], [1, 1.5]])
+    m = optkin.mechanisms.rpr3(a, b)
+    model = get_model(m)
+    real = H.covering_start(model)
+    broken = H.StartSystem(real.theta, real.solutions + 0.3, real.loops, real.time,
+                           real.stopped, real.trace)  # not solutions: every path fails
+    monkeypatch.setattr(H, "covering_start", lambda model: broken)
+    s = np.linalg.norm(np.array([3.0, 2.0]) + (_rot2(0.4) @ b.T).T - a, axis=1)
+    modes = optkin.assembly_modes(m, s, method="homotopy", seed=3)
+    ref, _ = rpr_reference(a, b, s)
+    assert modes.info["start_pattern"] == "own" and modes.complete
+    assert _matches([r.x for r in modes], ref)
+
+
 def test_3rrr_random_instances_match_the_elimination():
     """A 3-RRR at fixed actuated angles is a 3-RPR whose base points are the elbows
     C_i = A_i + l_i (cos q_i, sin q_i) and whose legs are the distal lengths: its modes
@@ -111,7 +152,7 @@ def test_hermite_tracker_ends_where_the_rk4_loop_does():
     if tr is None:
         pytest.skip("no C compiler: only the Python loop exists here")
     assert tr.predictor == "hermite"
-    S = H.load_or_build_start(model, seed=0)
+    S = H.covering_start(model)  # the generic platform's (shipped): no monodromy here
     target = np.concatenate([DIET_L, np.asarray(model.p)[sys.p_used],
                              np.zeros(sys.n)]).astype(complex)
     g = np.exp(0.7j)

@@ -106,19 +106,26 @@ def _select_rows(st: Structure, p: np.ndarray, mech: Mechanism, samples: int = 4
     key = ("rows", samples)
     f = st.cache.get(key)
     if f is None:  # once per structure: every geometry of it is checked with this Function,
-        # all samples in one call (the rows and their Jacobians side by side)
+        # all samples in one call (the rows and their Jacobians side by side), through
+        # preallocated buffers (a numpy call of a Function costs 100 us)
         v = ca.vertcat(st.qa, st.x)
-        one = ca.Function("rows", [v, st.p], [phi, ca.jacobian(phi, v)])
-        f = st.cache[key] = (one.map("rows_map", "serial", samples, [1], []), v.shape[0])
-    fm, n = f
-    rng = np.random.default_rng(seed)
+        one = ca.Function("rows", [v, st.p], [ca.densify(phi), ca.densify(ca.jacobian(phi, v))])
+        fm = one.map("rows_map", "serial", samples, [1], [])
+        rng = np.random.default_rng(seed)
+        n = v.shape[0]
+        Z = rng.uniform(-np.pi, np.pi, (samples, n))  # the same draws as one row at a time
+        f = st.cache[key] = (cc.FastFn(fm), Z, threading.Lock())
+    fm, Z, lock = f
+    n = Z.shape[1]
+    m = phi.shape[0]
     L = float(p[-1])
     is_len = np.concatenate([np.zeros(st.qa.shape[0], bool), st.x_length])
-    Z = rng.uniform(-np.pi, np.pi, (samples, n))  # the same draws as one row at a time
     Z = np.where(is_len[None, :], Z * L / np.pi, Z)
-    out = fm(Z.T, p)
-    V = np.array(out[0])  # (m, samples)
-    G = np.array(out[1])  # (m, n * samples): the samples' Jacobians side by side
+    with lock:
+        out = fm(Z.ravel(), p)
+        # column-major outputs: (m, samples) values, (m, n * samples) Jacobians
+        V = out[0].reshape(samples, m).T.copy()
+        G = out[1].reshape(n * samples, m).T.copy()
     vals = [V[:, k] for k in range(samples)]
     if not np.all(np.isfinite(G)):
         raise MechanismError("the closure rows are not finite at random configurations; "
@@ -207,6 +214,10 @@ class Topology:
                     v = build()
                     self._store[key] = v
         return v
+
+    def peek(self, key: Hashable) -> Any:
+        """What :meth:`cached` keeps under ``key``, or None (nothing is built)."""
+        return self._store.get(key)
 
     def forget(self, key: Hashable) -> None:
         """Drop what :meth:`cached` keeps under ``key`` (a result that must not be reused)."""

@@ -590,14 +590,15 @@ _MULTISTART_ONLY = ("starts", "min_starts", "target", "target_upper", "bound", "
 
 def _homotopy_ready(model: Model, given: dict[str, Any]) -> bool:
     """``method="auto"`` takes the homotopy: the package ships this topology's start
-    system (a deterministic choice: never the state of a cache) and no option of the
-    multistart was given."""
+    system, for the geometry's pattern of structural entries or a wider family's (a
+    deterministic choice: never the state of a cache), and no option of the multistart
+    was given."""
     if any(k in given for k in _MULTISTART_ONLY) or model.m != model.nx:
         return False
-    from .homotopy import shipped_path
+    from .homotopy import covering_start, shipped_start
 
-    try:
-        return shipped_path(model).is_file()
+    try:  # the pattern's own, or a wider family's (homotopy_modes starts from it)
+        return shipped_start(model) is not None or covering_start(model) is not None
     except MechanismError:
         return False
 

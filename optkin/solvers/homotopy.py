@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -696,6 +697,9 @@ class StartSystem:
         return int(self.solutions.shape[0])
 
 
+_PATTERNS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 def structural(model) -> tuple[tuple[int, float], ...]:
     """The geometry entries (positions in the homotopy's parameters) taken to define the
     family rather than vary within it: those equal to 0, +-1, +-pi/2 or +-pi. In a Khalil
@@ -704,7 +708,15 @@ def structural(model) -> tuple[tuple[int, float], ...]:
     and 6 of its 8 paths failed); in joint chains, the unit entries of joint axes (a
     3-RRR's randomised z axes left the rigid family: its solutions lay at |x| ~ 1e5 and
     monodromy found 2-3 of the 6). They stay fixed, real, in the start system, which is
-    built and stored per pattern; a geometry with another pattern gets its own."""
+    built and stored per pattern; a geometry with another pattern gets its own (or, until
+    it is built, the generic pattern's shipped one: :func:`homotopy_modes`)."""
+    pat = _PATTERNS.get(model)
+    if pat is None:
+        pat = _PATTERNS[model] = _structural(model)
+    return pat
+
+
+def _structural(model) -> tuple[tuple[int, float], ...]:
     sys = _system(model)
     p = np.asarray(model.p, dtype=float)[sys.p_used]
     special = np.array([0.0, np.pi / 2, -np.pi / 2, np.pi, -np.pi, 1.0, -1.0])
@@ -801,10 +813,11 @@ START_VERSION = "5"
 SHIPPED = Path(__file__).resolve().parent.parent / "data" / "start"
 
 
-def _start_key(model, seed: int) -> str:
+def _start_key(model, seed: int, pattern: tuple | None = None) -> str:
     import hashlib
 
-    key = f"{model.topology.key}|{START_VERSION}|{int(seed)}|{structural(model)}"
+    pat = structural(model) if pattern is None else pattern
+    key = f"{model.topology.key}|{START_VERSION}|{int(seed)}|{pat}"
     return hashlib.sha256(key.encode()).hexdigest()[:24]
 
 
@@ -817,19 +830,77 @@ def _start_path(model, seed: int):
     return d / f"optkin_start_{_start_key(model, seed)}.npz"
 
 
-def shipped_path(model) -> Path:
-    """Where the package keeps (or would keep) this topology's start system (built with
-    seed 0, used for every seed: the seed then picks the gamma paths)."""
-    return SHIPPED / f"start_{_start_key(model, 0)}.npz"
+def shipped_path(model, pattern: tuple | None = None) -> Path:
+    """Where the package keeps (or would keep) this topology's start system for the
+    pattern of ``model`` (or ``pattern``; ``()`` the generic one): built with seed 0, used
+    for every seed (the seed then picks the gamma paths)."""
+    return SHIPPED / f"start_{_start_key(model, 0, pattern)}.npz"
 
 
-def _verified(model, theta: np.ndarray, sols: np.ndarray) -> bool:
+def shipped_start(model, pattern: tuple | None = None) -> StartSystem | None:
+    """The shipped start system for the pattern of ``model`` (or ``pattern``), read and
+    verified once per topology and pattern; None when the package has none."""
+    pat = structural(model) if pattern is None else pattern
+
+    def load():
+        path = shipped_path(model, pat)
+        if path.is_file() and path.stat().st_size < 1 << 26:
+            S = _read_start(model, path.read_bytes(), pat)
+            if S is not None:
+                return S
+        return False  # none (cached: the file is looked for once)
+
+    S = model.topology.cached(("homotopy:shipped", pat), load)
+    return S if S is not False else None
+
+
+def covering_start(model) -> StartSystem | None:
+    """A shipped start system of this topology from a wider family: its structural entries
+    (read off its parameters: exactly 0, +-1, +-pi/2 or +-pi where the others are random
+    complex numbers) a subset of this geometry's, the widest such; None when there is none.
+    Its paths reach every isolated solution of this geometry too (parameter homotopy: the
+    geometry lies in its family). Looked for once per topology and pattern."""
+    pat = structural(model)
+    sys = _system(model)
+    special = np.array([0.0, np.pi / 2, -np.pi / 2, np.pi, -np.pi, 1.0, -1.0])
+
+    def find():
+        import io
+
+        best, size = False, -1
+        mine = dict(pat)
+        for f in sorted(SHIPPED.glob("start_*.npz")):
+            try:
+                with np.load(io.BytesIO(f.read_bytes()), allow_pickle=False) as z:
+                    theta = z["theta"]
+                    shape = z["solutions"].shape
+            except (OSError, ValueError, KeyError, TypeError):
+                continue
+            if theta.shape != (sys.nth,) or len(shape) != 2 or shape[1] != sys.n:
+                continue
+            g = theta[sys.na:sys.na + sys.np_]
+            hit = (g.imag == 0) & np.isin(g.real, special)
+            theirs = {sys.na + int(k): float(g[k].real) for k in np.flatnonzero(hit)}
+            if len(theirs) <= size or any(mine.get(k) != v for k, v in theirs.items()):
+                continue
+            S = _read_start(model, f.read_bytes(), tuple(sorted(theirs.items())))
+            if S is not None:
+                best, size = S, len(theirs)
+        return best
+
+    S = model.topology.cached(("homotopy:covering", pat), find)
+    return S if S is not False else None
+
+
+def _verified(model, theta: np.ndarray, sols: np.ndarray, pattern: tuple | None = None
+              ) -> bool:
     """The stored solutions solve their system, nonsingular and distinct (a damaged or
     foreign file is recomputed, never trusted)."""
     sys = _system(model)
     if theta.shape != (sys.nth,) or sols.ndim != 2 or sols.shape[1] != sys.n or not len(sols):
         return False
-    if any(theta[k] != v for k, v in structural(model)):  # another family's start system
+    pat = structural(model) if pattern is None else pattern
+    if any(theta[k] != v for k, v in pat):  # another family's start system
         return False
     n = sols.shape[0]
     Hv, J, _ = sys.eval(sols, np.repeat(theta[None], n, 0), np.zeros((n, sys.nth), complex))
@@ -841,7 +912,7 @@ def _verified(model, theta: np.ndarray, sols: np.ndarray) -> bool:
     return _distinct(model, np.zeros((0, sys.n)), _canonical(model, sols)).shape[0] == n
 
 
-def _read_start(model, data: bytes) -> StartSystem | None:
+def _read_start(model, data: bytes, pattern: tuple | None = None) -> StartSystem | None:
     import io
 
     try:
@@ -851,7 +922,8 @@ def _read_start(model, data: bytes) -> StartSystem | None:
             stopped, trace = str(z["stopped"]), float(z["trace"])
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    if stopped in ("bound", "trace", "stale", "max_loops") and _verified(model, theta, sols):
+    if (stopped in ("bound", "trace", "stale", "max_loops")
+            and _verified(model, theta, sols, pattern)):
         return StartSystem(theta, sols, loops, took, stopped, trace)
     return None
 
@@ -879,11 +951,9 @@ def load_or_build_start(model, seed: int = 0, deadline: Any = None) -> StartSyst
     :func:`start_system` and stored in the cache."""
     from ..model.compiled import _read_private
 
-    shipped = shipped_path(model)  # one per topology, whatever the seed
-    if shipped.is_file() and shipped.stat().st_size < 1 << 26:
-        S = _read_start(model, shipped.read_bytes())
-        if S is not None:
-            return S
+    S = shipped_start(model)  # one per topology, whatever the seed
+    if S is not None:
+        return S
     path = _start_path(model, seed)
     if path is not None and path.exists():
         with contextlib.suppress(OSError, ValueError):
@@ -900,6 +970,20 @@ def load_or_build_start(model, seed: int = 0, deadline: Any = None) -> StartSyst
 # ---------------------------------------------------------------------------------------
 # assembly modes by parameter homotopy
 # ---------------------------------------------------------------------------------------
+
+def _generic_first(model, seed: int) -> bool:
+    """No start system stored for this geometry's pattern (shipped or in the cache), and
+    the package ships one of a wider family (:func:`covering_start`)."""
+    pat = structural(model)
+    if not pat or model.topology.peek(("homotopy:start", int(seed), pat)) is not None:
+        return False
+    if shipped_start(model) is not None:
+        return False
+    path = _start_path(model, seed)
+    if path is not None and path.exists():
+        return False
+    return covering_start(model) is not None
+
 
 def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = None,
                    tol: float = 1e-10, time_limit: float | None = None) -> SolutionSet:
@@ -924,20 +1008,30 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     tr = _tracker(model)
     budget = (time_budget() if time_limit is None else
               min(check_number("time_limit", time_limit, strict=True), time_budget()))
-    if start is None:
+    def exact_start():  # this pattern's own: stored, or built by monodromy now
         key = ("homotopy:start", int(seed), structural(model))
-        start = model.topology.cached(key, lambda: load_or_build_start(
+        S = model.topology.cached(key, lambda: load_or_build_start(
             model, seed, Deadline(min(max(60.0, budget), time_budget()))))
-        if start.stopped == "time":  # cut short: never reused
+        if S.stopped == "time":  # cut short: never reused
             model.topology.forget(key)
+        return S
+
+    # a geometry whose pattern of structural entries has no start system stored yet (a
+    # 3-RPR with a base point at the origin, a planar 6-6 platform) starts from a shipped
+    # one of a wider family (:func:`covering_start`): its paths reach every isolated
+    # solution of the special geometry too; only when some fail is the pattern's own built
+    generic = start is None and _generic_first(model, seed)
+    if generic:
+        start = covering_start(model)
+    elif start is None:
+        start = exact_start()
     deadline = Deadline(budget)
     t_start = time.perf_counter()
     target = np.concatenate([qa, np.asarray(model.p, dtype=float)[sys.p_used],
                              np.zeros(sys.n)]).astype(complex)
-    rng = np.random.default_rng([int(seed), 11])
     sc = sys.scale
 
-    def account(Q):  # (finite indices, canonical endpoints, singular, path jumps, bad)
+    def tally(Q):  # (finite indices, canonical endpoints, singular, path jumps, bad)
         fin = np.flatnonzero(Q.status == "finite")
         Xf = _canonical(model, Q.x[fin])
         singular = Q.cond[fin] > 1e10
@@ -949,18 +1043,26 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     # failed path (one that swings far out near parameters where a solution goes to
     # infinity) or two paths ending at one point (a jump) send all of them along another
     # gamma, up to ``TRIES`` times; the best account is kept
-    P = acc = None
-    tries = 0
-    while tries < TRIES:
-        tries += 1
-        gamma = np.exp(2j * np.pi * rng.uniform())
-        Q = track(sys, start.solutions, start.theta, target, gamma, tracker=tr,
-                  deadline=deadline)
-        a = account(Q)
-        if P is None or a[4] < acc[4]:
-            P, acc = Q, a
-        if acc[4] == 0 or deadline.expired():
-            break
+    def paths(start):
+        rng = np.random.default_rng([int(seed), 11])
+        P = acc = None
+        tries = 0
+        while tries < TRIES:
+            tries += 1
+            gamma = np.exp(2j * np.pi * rng.uniform())
+            Q = track(sys, start.solutions, start.theta, target, gamma, tracker=tr,
+                      deadline=deadline)
+            a = tally(Q)
+            if P is None or a[4] < acc[4]:
+                P, acc = Q, a
+            if acc[4] == 0 or deadline.expired():
+                break
+        return P, acc, tries
+
+    P, acc, tries = paths(start)
+    if generic and acc[4] and not deadline.expired():
+        start, generic = exact_start(), False
+        P, acc, tries = paths(start)
     late = deadline.expired() and bool(np.any(P.status == "failed"))  # paths cut short
     fin, Xf, singular, jumped, _ = acc
     real = np.max(np.abs(Xf.imag) / sc, axis=1) < 1e-6
@@ -1017,6 +1119,11 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
             "bound": bound,
             "monodromy_loops": start.loops, "start_time": start.time, "gamma_tries": tries,
             "monodromy_stopped": start.stopped, "trace": start.trace,
+            "start_pattern": "wider" if generic else "own",
             "time": time.perf_counter() - t0, "method": "homotopy"}
-    return SolutionSet(out, "assembly modes", info, seed=int(seed), dimension=None,
+    # isolated solutions only when every path is accounted for and none ends singular (a
+    # continuum's points end singular paths); else not known here
+    dim = 0 if complete and not singular.any() else None
+    info["dimension"] = dim
+    return SolutionSet(out, "assembly modes", info, seed=int(seed), dimension=dim,
                        stats=account)
