@@ -1,4 +1,4 @@
-"""assembly_modes(method="homotopy") beside in-run baselines: the multistart default and,
+"""assembly_modes(method="homotopy") beside in-run baselines: the multistart and,
 for the 3-RPR, the univariate polynomial of the elimination (numpy.roots, the floor).
 
 Start systems are built (or loaded from the cache) before timing; the time of building
@@ -37,7 +37,8 @@ def test_homotopy_rpr3_six(benchmark):
     optkin.assembly_modes(m, SIX_S, method="homotopy")
     res = benchmark(lambda: optkin.assembly_modes(m, SIX_S, method="homotopy"))
     t_poly = median_time(lambda: polynomial_floor(SIX_A, SIX_B, SIX_S), min_time=0.2)
-    t_multi = median_time(lambda: optkin.assembly_modes(m, SIX_S), min_time=0.5)
+    t_multi = median_time(lambda: optkin.assembly_modes(m, SIX_S, method="multistart"),
+                          min_time=0.5)
     record(benchmark, t_poly, "univariate polynomial (numpy.roots), the floor",
            mechanism="rpr3-six", count=len(res), complete=res.complete,
            paths=res.stats.paths, multistart_s=t_multi, start_system_s=_start_time(m))
@@ -49,13 +50,15 @@ def test_homotopy_stewart_dietmaier(benchmark):
     optkin.assembly_modes(m, DIET_L, method="homotopy")
     res = benchmark.pedantic(lambda: optkin.assembly_modes(m, DIET_L, method="homotopy"),
                              rounds=5, iterations=1)
-    t_multi = median_time(lambda: optkin.assembly_modes(m, DIET_L), min_time=1.0)
+    t_multi = median_time(lambda: optkin.assembly_modes(m, DIET_L, method="multistart"),
+                          min_time=1.0)
     rng = np.random.default_rng(0)  # a generic instance: legs from a random pose
     perturbed = DIET_L * (1 + 0.02 * rng.uniform(-1, 1, 6))
-    t_multi_generic = median_time(lambda: optkin.assembly_modes(m, perturbed), min_time=1.0)
+    t_multi_generic = median_time(
+        lambda: optkin.assembly_modes(m, perturbed, method="multistart"), min_time=1.0)
     t_hom_generic = median_time(lambda: optkin.assembly_modes(m, perturbed, method="homotopy"),
                                 min_time=1.0)
-    record(benchmark, t_multi, "multistart (the default), Dietmaier's legs",
+    record(benchmark, t_multi, "multistart, Dietmaier's legs",
            mechanism="stewart-dietmaier", count=len(res), complete=res.complete,
            paths=res.stats.paths, generic_multistart_s=t_multi_generic,
            generic_homotopy_s=t_hom_generic, start_system_s=_start_time(m))
@@ -85,9 +88,43 @@ def test_homotopy_rpr3_random_200(benchmark):
         poly.append(median_time(lambda a=a, b=b, s=s: polynomial_floor(a, b, s), min_time=0.01))
     benchmark.pedantic(lambda: [optkin.assembly_modes(m, s, method="homotopy")
                                 for m, _, _, s in inst], rounds=3, iterations=1)
+    warm = []  # the same instances again: models built, nothing new
+    for m, _, _, s in inst:
+        t0 = time.perf_counter()
+        optkin.assembly_modes(m, s, method="homotopy")
+        warm.append(time.perf_counter() - t0)
     record(benchmark, float(np.sum(poly)), "numpy.roots on the sextic, per instance, summed",
            mechanism="rpr3-random-200", complete=complete,
            homotopy_median_s=float(np.median(hom)), homotopy_max_s=float(np.max(hom)),
            sextic_median_s=float(np.median(poly)),
-           median_ratio=float(np.median(hom) / np.median(poly)))
+           median_ratio=float(np.median(hom) / np.median(poly)),
+           warm_median_s=float(np.median(warm)),
+           first_call_over_warm=float(np.median(hom) / np.median(warm)))
     assert complete == 200
+
+
+def test_homotopy_stewart_first_call(benchmark):
+    """A new geometry of a known topology (no compilation, the start system loaded): the
+    first call on each of 10 new 6-6 platforms beside a second call on the same one."""
+    rng = np.random.default_rng(4)
+    plat = []
+    for _ in range(10):
+        A = DIET_A + rng.uniform(-0.02, 0.02, DIET_A.shape)
+        B = DIET_B + rng.uniform(-0.02, 0.02, DIET_B.shape)
+        plat.append((optkin.mechanisms.stewart_gough(A, B), DIET_L))
+    optkin.assembly_modes(optkin.mechanisms.stewart_gough(DIET_A + 0.01, DIET_B), DIET_L)
+    first, warm = [], []
+    for m, L in plat:
+        t0 = time.perf_counter()
+        res = optkin.assembly_modes(m, L)
+        first.append(time.perf_counter() - t0)
+        assert res.stats.method == "homotopy" and res.complete, res.info["message"]
+        t0 = time.perf_counter()
+        optkin.assembly_modes(m, L)
+        warm.append(time.perf_counter() - t0)
+    benchmark.pedantic(lambda: [optkin.assembly_modes(m, L) for m, L in plat], rounds=1,
+                       iterations=1)
+    record(benchmark, float(np.sum(warm)), "the same calls again (warm), summed",
+           mechanism="stewart-new-geometry", first_median_s=float(np.median(first)),
+           warm_median_s=float(np.median(warm)),
+           first_call_over_warm=float(np.median(first) / np.median(warm)))
