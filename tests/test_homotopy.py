@@ -322,3 +322,30 @@ def test_time_limit_stops_a_monodromy_that_does_not_end(monkeypatch, tmp_path):
     assert modes.info["monodromy_stopped"] == "time"
     assert "time limit" in modes.info["message"]
     assert not list(tmp_path.glob("optkin_start_*.npz"))
+
+
+_ORDER = """
+import sys, json, numpy as np, optkin
+big = optkin.mechanisms.rpr3([[0.3, 0.1], [40.0, -2.0], [17.0, 35.0]],
+                             [[-4.0, -2.5], [5.0, -3.5], [1.0, 6.0]])
+small = optkin.mechanisms.rpr3([[0.03, 0.01], [1.0, -0.05], [0.4, 0.9]],
+                               [[-0.1, -0.06], [0.12, -0.09], [0.02, 0.15]])
+if sys.argv[1] == "big-first":
+    optkin.assembly_modes(big, [30.0, 25.0, 28.0], method="homotopy")
+m = optkin.assembly_modes(small, [0.55, 0.62, 0.5], method="homotopy")
+print(json.dumps([r.x.tolist() for r in m]))
+"""
+
+
+def test_results_do_not_depend_on_the_geometry_seen_first():
+    """The compiled tracker is one per topology; the scale of the unknowns (the model's
+    size) is an input of each run, not a constant of whichever geometry built it: a small
+    3-RPR's modes are the same to the bit whether a forty times larger one ran first in the
+    process (they differed at round-off, and results of parallel runs with them)."""
+    import subprocess
+    import sys
+
+    out = [subprocess.run([sys.executable, "-c", _ORDER, order], capture_output=True,
+                          text=True, timeout=300, check=True).stdout
+           for order in ("big-first", "alone")]
+    assert out[0] == out[1] and len(out[0]) > 10

@@ -293,14 +293,17 @@ class _Tracker:
         out = sys.f_sx(*ins)
         f_hj = ca.Function("homotopy_hj", ins[:4], out[:4])
         f_jt = ca.Function("homotopy_jt", ins, out[2:])
-        sc = ca.DM(sys.scale)
         self.width = 2 * n + 4 + (6 * n + 2 if predictor == "hermite" else 0)
         self.predictor = predictor
         s = sym.sym("state", self.width)
-        par = sym.sym("par", 4 * nth + 2)
+        # the parameters of a run: start theta, direction, gamma and the scale of the
+        # unknowns (the target model's: an input, so that the compiled tracker is one per
+        # topology whatever geometry was seen first)
+        par = sym.sym("par", 4 * nth + 2 + n)
         th0 = (par[0:nth], par[nth:2 * nth])
         d = (par[2 * nth:3 * nth], par[3 * nth:4 * nth])
         g = (par[4 * nth], par[4 * nth + 1])
+        sc = par[4 * nth + 2:]
 
         def theta(t):
             den = (1 + (g[0] - 1) * t, g[1] * t)
@@ -446,9 +449,12 @@ class _Tracker:
         return fm
 
     def run(self, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray, gamma: complex,
-            max_steps: int = 5000, deadline: Any = None):
-        """(X, status, t, steps) after tracking the rows of X0 from th0 to th1."""
+            max_steps: int = 5000, deadline: Any = None, scale: np.ndarray | None = None):
+        """(X, status, t, steps, cond) after tracking the rows of X0 from th0 to th1
+        (``scale``: of the unknowns, default the system's; cond None unless computed in the
+        compiled call)."""
         N, n = X0.shape
+        scale = self.sys.scale if scale is None else np.asarray(scale, dtype=float)
         W = self.width
         S = np.zeros((N, W))
         S[:, :n], S[:, n:2 * n] = X0.real, X0.imag
@@ -458,11 +464,12 @@ class _Tracker:
             TH = np.repeat(th0[None], N, 0)
             DTH = np.repeat((gamma * d)[None], N, 0)
             _, J, Ht = self.sys.eval(X0.astype(complex), TH, DTH)
-            k = -_solve_scaled(J, Ht, X0, self.sys.scale)
+            k = -_solve_scaled(J, Ht, X0, scale)
             o = 2 * n + 4
             S[:, o + 2 * n + 1:o + 3 * n + 1] = k.real
             S[:, o + 3 * n + 1:o + 4 * n + 1] = k.imag
-        par = np.concatenate([th0.real, th0.imag, d.real, d.imag, [gamma.real, gamma.imag]])
+        par = np.concatenate([th0.real, th0.imag, d.real, d.imag, [gamma.real, gamma.imag],
+                              scale])
         act = np.arange(N)
         cond = np.full(N, np.inf)
         steps = 0
@@ -522,16 +529,19 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
           gamma: complex, h0: float = 0.05, hmax: float = 0.25,
           hmin: float = 1e-12, big: float = 1e8, max_steps: int = 5000,
           accept_tol: float = 1e-6, grow: float = 1.25,
-          tracker: _Tracker | None = None, deadline: Any = None) -> _Paths:
+          tracker: _Tracker | None = None, deadline: Any = None,
+          scale: np.ndarray | None = None) -> _Paths:
     """Track the solutions X0 (N, n) of H(.; th0) to H(.; th1) along the gamma path
-    (by ``tracker``, compiled, when given: then the step parameters are its own)."""
+    (by ``tracker``, compiled, when given: then the step parameters are its own).
+    ``scale``: of the unknowns (the model's ``x_scale``; default the system's)."""
     N, n = X0.shape
+    sc = sys.scale if scale is None else np.asarray(scale, dtype=float)
     if tracker is not None:
-        X, status, t, steps, cond = tracker.run(X0, th0, th1, gamma, max_steps, deadline)
+        X, status, t, steps, cond = tracker.run(X0, th0, th1, gamma, max_steps, deadline,
+                                                sc)
         if cond is None:  # polished already: the condition numbers in numpy
-            cond = _endpoint_cond(sys, X, status, th1)
+            cond = _endpoint_cond(sys, X, status, th1, sc)
         return _Paths(X, status, cond, t, steps)
-    sc = sys.scale
     d = th1 - th0
 
     def theta(t):
@@ -600,10 +610,10 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
         status[rej[h[rej] < hmin]] = "failed"
         status[act[(t[act] >= 1.0) & (status[act] == "running")]] = "finite"
     status[status == "running"] = "failed"
-    return _polish(sys, X, status, t, steps, th1)
+    return _polish(sys, X, status, t, steps, th1, sc)
 
 
-def _endpoint_cond(sys: _System, X, status, th1) -> np.ndarray:
+def _endpoint_cond(sys: _System, X, status, th1, sc) -> np.ndarray:
     """The condition numbers of Jx (columns scaled) at the finite endpoints (inf else)."""
     cond = np.full(X.shape[0], np.inf)
     fin = np.flatnonzero(status == "finite")
@@ -611,13 +621,12 @@ def _endpoint_cond(sys: _System, X, status, th1) -> np.ndarray:
         TH = np.repeat(th1[None, :], fin.size, axis=0)
         _, J, _ = sys.eval(X[fin], TH, np.zeros_like(TH))
         with np.errstate(all="ignore"):
-            cond[fin] = np.linalg.cond(J * sys.scale[None, None, :])
+            cond[fin] = np.linalg.cond(J * sc[None, None, :])
     return cond
 
 
-def _polish(sys: _System, X, status, t, steps, th1) -> _Paths:
+def _polish(sys: _System, X, status, t, steps, th1, sc) -> _Paths:
     """Newton at the target on the finite endpoints, and their condition numbers."""
-    sc = sys.scale
     cond = np.full(X.shape[0], np.inf)
     fin = np.flatnonzero(status == "finite")
     if fin.size:
@@ -752,7 +761,7 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
     sys = _system(model)
     tr = _tracker(model)
     rng = np.random.default_rng([int(seed), 7])
-    sc = sys.scale
+    sc = np.asarray(model.x_scale, dtype=float)
     x0 = sc * (rng.normal(size=sys.n) + 1j * rng.normal(size=sys.n))
     th = _random_theta(sys, model, rng, c=np.zeros(sys.n))
     H, _, _ = sys.eval(x0[None, :], th[None, :], np.zeros((1, sys.nth)))
@@ -773,7 +782,7 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
             Y = S
             for a, b in ((th, th1), (th1, th2), (th2, th)):
                 g = np.exp(2j * np.pi * rng.uniform())
-                P = track(sys, Y, a, b, g, tracker=tr, deadline=deadline)
+                P = track(sys, Y, a, b, g, tracker=tr, deadline=deadline, scale=sc)
                 Y = P.x[P.status == "finite"]
                 if Y.size == 0:
                     break
@@ -1029,7 +1038,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     t_start = time.perf_counter()
     target = np.concatenate([qa, np.asarray(model.p, dtype=float)[sys.p_used],
                              np.zeros(sys.n)]).astype(complex)
-    sc = sys.scale
+    sc = np.asarray(model.x_scale, dtype=float)
 
     def tally(Q):  # (finite indices, canonical endpoints, singular, path jumps, bad)
         fin = np.flatnonzero(Q.status == "finite")
@@ -1051,7 +1060,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
             tries += 1
             gamma = np.exp(2j * np.pi * rng.uniform())
             Q = track(sys, start.solutions, start.theta, target, gamma, tracker=tr,
-                      deadline=deadline)
+                      deadline=deadline, scale=sc)
             a = tally(Q)
             if P is None or a[4] < acc[4]:
                 P, acc = Q, a
