@@ -249,13 +249,15 @@ def predict(costs, fixed: float, per_unit: float, warm: float, parent: float, wo
 # The benchmark
 # ---------------------------------------------------------------------------------------
 
-def _local_cluster(workers: int):
+def _local_cluster(workers: int, cache: Path):
     from distributed import LocalCluster
     # started as the README says to start Dask workers for optkin: with its preload, which
-    # starts the optkin worker processes with the Dask workers
+    # starts the optkin worker processes with the Dask workers; like every other run, with
+    # its own empty compiled-code cache (the workers' environment, not this process's)
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                         dashboard_address=None, silence_logs=50,
-                        preload=["optkin.problems.dask_worker"])
+                        preload=["optkin.problems.dask_worker"],
+                        env={"OPTKIN_CACHE": str(cache)})
 
 
 ROUNDS = int(os.environ.get("OPTKIN_SCALING_ROUNDS", "1"))
@@ -301,8 +303,9 @@ def test_scaling(benchmark, tmp_path):
             for P in counts if have_dask else ():
                 key = f"dask{P}"
                 out = tmp_path / f"{key}_{r}"
-                with _local_cluster(P) as cluster:
-                    wall, _ = run_batch(batch, out, tmp_path / f"cache_{key}_{r}",
+                cache = tmp_path / f"cache_{key}_{r}"
+                with _local_cluster(P, cache) as cluster:
+                    wall, _ = run_batch(batch, out, cache,
                                         scheduler=cluster.scheduler_address)
                 walls.setdefault(key, []).append(wall)
                 same[key] = same.get(key, True) and results_of(out) == ref

@@ -403,23 +403,23 @@ class _Tracker:
                             keep(kn[0], dx[0]), keep(kn[1], dx[1]),
                             keep(dx[0], dxp[0]), keep(dx[1], dxp[1]),
                             ca.if_else(acc, 1.0, hasp))
-        step = ca.Function("homotopy_step", [s, par], [s1])
-        S = s
-        for _ in range(CHUNK):
-            S = step(S, par)
+        # common subexpressions merged (the angles' cos and sin recur): a 3-RPR's step
+        # runs twice as fast compiled
+        opts = {"cse": True} if sx else {}
+        step = ca.Function("homotopy_step", [s, par], [s1], opts)
         # the polish, in the same call: three Newton steps at the target (s(1) = 1) on the
         # paths that have arrived (again in later calls: a converged point stays), and the
         # condition number of Jx there (columns scaled), written out for the adjugate's
         # orders, else from one evaluation in numpy (:func:`_endpoint_cond`)
-        X = (S[0:n], S[n:2 * n])
+        X = Xa
         TH1 = (th0[0] + d[0], th0[1] + d[1])
-        done = S[2 * n + _ST] == 1
+        done = st == 1
         for _ in range(3):
             Hr, Hi, Jr, Ji = f_hj(X[0], X[1], TH1[0], TH1[1])
             up = csolve(Jr, Ji, Hr, Hi, X)
             use = ca.logic_and(done, _finite(ca.vertcat(*up)))
             X = tuple(X[i] - ca.if_else(use, up[i], 0) for i in (0, 1))
-        S = ca.vertcat(X[0], X[1], S[2 * n:])
+        S = ca.vertcat(X[0], X[1], s[2 * n:])
         self.fused_cond = n <= 3 and sx
         if self.fused_cond:
             _, _, Jr, Ji = f_hj(X[0], X[1], TH1[0], TH1[1])
@@ -427,10 +427,12 @@ class _Tracker:
             cond = ca.if_else(done, _adjugate_cond(Jr * D, Ji * D), ca.inf)
         else:
             cond = ca.inf
-        # common subexpressions merged (the inlined steps repeat the angles' cos and sin):
-        # a 3-RPR's chunk 57k -> 49k instructions and twice as fast compiled
-        self.chunk = ca.Function("homotopy_chunk", [s, par], [S, cond],
-                                 {"cse": True} if sx else {})
+        polish = ca.Function("homotopy_polish", [s, par], [S, cond], opts)
+        # CHUNK steps as a loop over the step (fold), then the polish: C code the size of
+        # one step (inlined, a 3-RPR's chunk took gcc 4-5 s; a loop, under a second)
+        ms, mp = ca.MX.sym("state", self.width), ca.MX.sym("par", par.shape[0])
+        last = step.fold(CHUNK)(ms, ca.repmat(mp, 1, CHUNK))
+        self.chunk = ca.Function("homotopy_chunk", [ms, mp], polish(last, mp))
         from ..model import compiled as cc
 
         lib = cc.library(f"homotopy_track:{sys.key}:{predictor}", [self.chunk])
@@ -980,16 +982,12 @@ def load_or_build_start(model, seed: int = 0, deadline: Any = None) -> StartSyst
 # assembly modes by parameter homotopy
 # ---------------------------------------------------------------------------------------
 
-def _generic_first(model, seed: int) -> bool:
-    """No start system stored for this geometry's pattern (shipped or in the cache), and
-    the package ships one of a wider family (:func:`covering_start`)."""
+def _generic_first(model) -> bool:
+    """The package ships no start system for this geometry's pattern, and one of a wider
+    family (:func:`covering_start`). Decided by the package's files alone, never by what
+    a cache holds, so that a result does not depend on what ran before."""
     pat = structural(model)
-    if not pat or model.topology.peek(("homotopy:start", int(seed), pat)) is not None:
-        return False
-    if shipped_start(model) is not None:
-        return False
-    path = _start_path(model, seed)
-    if path is not None and path.exists():
+    if not pat or shipped_start(model) is not None:
         return False
     return covering_start(model) is not None
 
@@ -1029,7 +1027,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     # 3-RPR with a base point at the origin, a planar 6-6 platform) starts from a shipped
     # one of a wider family (:func:`covering_start`): its paths reach every isolated
     # solution of the special geometry too; only when some fail is the pattern's own built
-    generic = start is None and _generic_first(model, seed)
+    generic = start is None and _generic_first(model)
     if generic:
         start = covering_start(model)
     elif start is None:
