@@ -169,9 +169,28 @@ class _FreeTest:
         st = topo.st
         self.det = topo.cached("aspects3d:det", lambda: ca.Function(
             "detWp", [st.qa, st.x, st.p], [ca.det(ca.jacobian(topo.phi_sym, st.x))]))
+        self._maps: dict[int, Any] = {}
         names = list(mech.active_names)
         self.lim = [(names.index(k), float(v[0]), float(v[1]))
                     for k, v in dict(limits or {}).items()]
+
+    def _det(self, qa: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """det W_p at the rows of (qa, X): mapped over padded power-of-two blocks, the
+        maps built once (they had been built per call: 1226 maps in one 3-RPR's aspects)."""
+        from ..model.compiled import FastFn
+
+        N = len(X)
+        n = 1 << max(0, (N - 1).bit_length())
+        fm = self._maps.get(n)
+        if fm is None:
+            fm = self._maps[n] = FastFn(self.det.map(f"detWp_{n}", "serial", n, [2], []),
+                                        fixed=[self.model.p])
+        A = np.zeros((n, qa.shape[1] + X.shape[1]))
+        A[:N, :qa.shape[1]], A[:N, qa.shape[1]:] = qa, X
+        A[N:] = A[:1]  # padding: a real point, no NaN
+        out = fm(np.ascontiguousarray(A[:, :qa.shape[1]]).ravel(),
+                 np.ascontiguousarray(A[:, qa.shape[1]:]).ravel())
+        return out[0][:N].copy()
 
     def vertical(self, P: np.ndarray, a: float, b: float, sign: int, n: int = 24) -> np.ndarray:
         """For each point P (k, 2): free with det sign ``sign`` at n + 1 orientations from
@@ -187,7 +206,7 @@ class _FreeTest:
         qa = V[:, :self.model.na]
         for j, lo, hi in self.lim:
             ok &= (qa[:, j] >= lo) & (qa[:, j] <= hi)
-        d = np.array(self.det.map(len(X))(qa.T, X.T, self.model.p)).ravel()
+        d = self._det(qa, X)
         ok &= np.sign(d) == sign
         return ok.reshape(k, len(ph)).all(axis=1)
 

@@ -19,12 +19,15 @@ geometry.
 from __future__ import annotations
 
 import itertools
+import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
 import numpy as np
+
+from . import compiled as cc
 
 __all__ = ["PlanarChart", "planar_chart"]
 
@@ -41,21 +44,27 @@ def _chunked(model: Any, key: str, X: np.ndarray) -> list[np.ndarray]:
     mapped over at most CHUNK points at a time (memory stays bounded), the maps built once
     per topology for chunks of 2^k points."""
     N = X.shape[0]
-    f = model.cached(("planar_chart", key), lambda: _build(model, key))
+    f = model.cached(("planar_chart", key), lambda: _dense(_build(model, key)))
     n = 1
     while n < min(N, CHUNK):
         n *= 2
-    fm = model.cached(("planar_chart", key, n), lambda: f.map(n))
-    p = model.p
+    # through preallocated buffers (a numpy call of a Function costs 0.1-0.4 ms); one
+    # FastFn per topology and size (the geometry an input), its calls serialised (its
+    # buffers are shared)
+    fm, lock = model.cached(("planar_chart", key, n), lambda: (
+        cc.FastFn(f.map(f"{f.name()}_{n}", "serial", n, [1], [])), threading.Lock()))
+    p = np.asarray(model.p, dtype=float)
+    rows = [f.size1_out(j) for j in range(f.n_out())]
     outs: list[list[np.ndarray]] = [[] for _ in range(f.n_out())]
     for s in range(0, N, n):
         blk = X[s:s + n]
         k = blk.shape[0]
         if k < n:
             blk = np.vstack([blk, np.repeat(blk[-1:], n - k, axis=0)])
-        res = fm.call([blk.T, p])
-        for j, r in enumerate(res):
-            outs[j].append(np.array(r).T[:k])
+        with lock:
+            res = fm(np.ascontiguousarray(blk).ravel(), p)
+            for j, r in enumerate(res):  # column-major (rows, n): row i of the block
+                outs[j].append(r.reshape(n, rows[j])[:k].copy())
     return [np.vstack(o) if o else np.zeros((0, f.size1_out(j)))
             for j, o in enumerate(outs)]
 
@@ -258,6 +267,12 @@ def planar_chart(model: Any) -> PlanarChart | None:
 
 # --------------------------------------------------------------------------------------
 # per-topology Functions
+
+
+def _dense(f: ca.Function) -> ca.Function:
+    """``f`` with dense outputs (read straight from the buffers of a FastFn)."""
+    ins = f.sx_in() if f.is_a("SXFunction") else f.mx_in()
+    return ca.Function(f.name(), ins, [ca.densify(o) for o in f.call(ins)])
 
 
 def _build(model: Any, key: str) -> ca.Function:
