@@ -28,6 +28,7 @@ Modern Robotics 7.3 (seed 001).
 
 from __future__ import annotations
 
+import math
 import numbers
 import threading
 import time
@@ -394,6 +395,7 @@ class _Tracer:
         self.budget = budget if budget is not None else _Budget()
         self.pfix = pvals
         self.lim = lim
+        self._w: np.ndarray | None = None
         self.free = np.array(sys.free_idx)
         self.per = sys.periodic[self.free]
         self.scl = sys.scale[self.free]
@@ -413,7 +415,12 @@ class _Tracer:
 
     # scaled evaluation ------------------------------------------------------------
     def GJ(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        out = self.sys.gjw(np.concatenate([u * self.scl, self.pfix, [self.lim]]))
+        w = self._w
+        if w is None:  # [z; fixed; lim]: the fixed part written once
+            w = self._w = np.concatenate([u * self.scl, self.pfix, [self.lim]])
+        else:
+            np.multiply(u, self.scl, out=w[:u.shape[0]])
+        out = self.sys.gjw(w)
         m = self.sys.n_rows
         g = out[:m]
         J = out[m:].reshape(self.sys.nz, m).T * self.scl
@@ -448,19 +455,24 @@ class _Tracer:
         """Newton on [G; t.(u - anchor)] = 0 from the prediction up."""
         a = up if anchor is None else anchor
         u = up.copy()
+        m = self.sys.n_rows
+        M = np.empty((m + 1, u.shape[0]))
+        F = np.empty(m + 1)
         for k in range(iters):
             g, J = self.GJ(u)
-            F = np.append(g, t @ (u - a))
-            if np.max(np.abs(g)) < self.tol and abs(F[-1]) < 1e-10:
+            F[:m] = g
+            F[m] = t @ (u - a)
+            if np.abs(g).max() < self.tol and abs(F[m]) < 1e-10:
                 self.last_J = J
                 return u, k
-            M = np.vstack([J, t])
+            M[:m] = J
+            M[m] = t
             try:
                 du = np.linalg.solve(M, -F)
             except np.linalg.LinAlgError:
                 return None, k
             u = u + du
-            if np.linalg.norm(du) > 4 * self.hmax:
+            if math.sqrt(du @ du) > 4 * self.hmax:
                 return None, k
         g, J = self.GJ(u)
         if np.max(np.abs(g)) < self.tol:
