@@ -9,9 +9,23 @@ import sys
 
 from conftest import median_time, record
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
-from test_aspects3d import LIMITS, voxel_aspects  # noqa: E402
+_TESTS = pathlib.Path(__file__).resolve().parents[1] / "tests"
+sys.path.insert(0, str(_TESTS))
 from test_continuation import BASE3, PLAT3  # noqa: E402
+
+
+def _tests_module(name: str):
+    """tests/<name>.py under another module name (this file has the same name)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(f"_tests_{name}", _TESTS / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+_T = _tests_module("test_aspects3d")
+LIMITS, voxel_aspects = _T.LIMITS, _T.voxel_aspects
 
 import optkin  # noqa: E402
 
