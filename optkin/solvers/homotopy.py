@@ -187,7 +187,7 @@ def _solve_scaled(J: np.ndarray, b: np.ndarray, X: np.ndarray, sc: np.ndarray) -
 # ---------------------------------------------------------------------------------------
 
 #: Steps per call of the compiled tracker (the paths' statuses are read between calls).
-CHUNK = 8
+CHUNK = 32
 
 #: Where each path's state sits in the compiled tracker's state vector (after 2n values).
 _T, _H, _ST, _CNT = 0, 1, 2, 3
@@ -434,7 +434,11 @@ class _Tracker:
         # CHUNK steps as a loop over the step (fold), then the polish: C code the size of
         # one step (inlined, a 3-RPR's chunk took gcc 4-5 s; a loop, under a second)
         ms, mp = ca.MX.sym("state", self.width), ca.MX.sym("par", par.shape[0])
-        last = step.fold(CHUNK)(ms, ca.repmat(mp, 1, CHUNK))
+        # a path that has stopped is not stepped again (a branch in the compiled code):
+        # a call can hold many steps without paying them for the paths already done
+        live = ca.Function("homotopy_live_step", [ms, mp], [ca.if_else(
+            ms[2 * n + _ST] == 0, step(ms, mp), ms, True)])
+        last = live.fold(CHUNK)(ms, ca.repmat(mp, 1, CHUNK))
         self.chunk = ca.Function("homotopy_chunk", [ms, mp], polish(last, mp))
         from ..model import compiled as cc
 
