@@ -225,9 +225,12 @@ def make_result(
     finite = bool(np.isfinite(x).all()) and math.isfinite(res)
     Wp = wp_b.reshape((model.nx, model.m)).T
     try:
-        sv = singular_values(Wp, "W_p") if finite and Wp.size else None
+        if finite and Wp.size and np.isfinite(Wp).all() and np.abs(Wp).max() < 1e150:
+            sv = np.linalg.svd(Wp, compute_uv=False)  # (no scaling needed at this size)
+        else:
+            sv = singular_values(Wp, "W_p") if finite and Wp.size else None
         cond = float(sv[0] / sv[-1]) if sv is not None and sv[-1] > 0 else float("inf")
-    except NumericError:  # W_p undefined here (e.g. a leg of zero length)
+    except (NumericError, np.linalg.LinAlgError):  # W_p undefined here (a leg of zero length)
         cond = float("nan")
     success = bool(finite and res <= tol)
     if status is None:

@@ -914,7 +914,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         from .homotopy import homotopy_modes
 
         modes = homotopy_modes(mech, qa, seed=int(seed), tol=o["tol"],
-                               time_limit=o["time_limit"])
+                               time_limit=o["time_limit"], _checked=True)
         if o["method"] == "auto" and not (len(modes) and modes.complete
                                           and modes.stats.singular == 0
                                           and modes.info["status"] != "iteration_limit"):

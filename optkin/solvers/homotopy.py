@@ -1024,7 +1024,8 @@ def _generic_first(model) -> bool:
 
 
 def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = None,
-                   tol: float = 1e-10, time_limit: float | None = None) -> SolutionSet:
+                   tol: float = 1e-10, time_limit: float | None = None,
+                   _checked: bool = False) -> SolutionSet:
     """Every real assembly mode of ``mech`` at ``qa`` by parameter homotopy (see the
     module docstring). ``start`` defaults to the topology's start system for ``seed``
     (built by monodromy on first use and kept for the process).
@@ -1040,7 +1041,8 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
 
     check_mechanism(mech, "homotopy")
     model = get_model(mech)
-    qa = check_qa(model, qa)
+    if not _checked:  # (assembly_modes has checked them)
+        qa = check_qa(model, qa)
     t0 = time.perf_counter()
     sys = _system(model)
     tr = _tracker(model)
@@ -1130,7 +1132,8 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     out.sort(key=lambda r: tuple(np.round(r.x / sc, 9)))
     n_fail = int(np.sum(P.status == "failed"))
     n_inf = int(np.sum(P.status == "at_infinity"))
-    bound = _enum.known_bound(model)
+    bound = model.topology.cached("homotopy:bound", lambda: _enum.known_bound(model) or -1)
+    bound = None if bound == -1 else bound
     short = bound is not None and start.root_count < bound  # monodromy missed some
     cut = start.stopped == "time"
     # without a known bound, a start system is complete only by the trace test
