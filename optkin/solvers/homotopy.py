@@ -442,18 +442,18 @@ class _Tracker:
         self.chunk = ca.Function("homotopy_chunk", [ms, mp], polish(last, mp))
         from ..model import compiled as cc
 
-        # compiled in the background: until the library is ready (about a second), runs
-        # use the interpreted chunk (a 3-RPR's call 11 ms instead of 1.4 ms, a 6-6
-        # platform's 0.4 s instead of 0.1 s; the same numbers to the bit, on 100 random
-        # 3-RPR and 6 random 6-6 platforms), so that a worker's first problem of a
-        # topology does not wait for the compiler. The trace test's chunk (MX with RK4)
-        # waits for its library: interpreted, it did not pass on start systems it passes
-        # compiled (not understood yet)
+        # an SX chunk (systems of up to 4 unknowns) compiles in the background: until the
+        # library is ready (about a second) runs use the interpreted chunk (a 3-RPR's call
+        # 11 ms instead of 1.4 ms; the same numbers to the bit on 100 random 3-RPR), so that
+        # a worker's first problem of a topology does not wait for the compiler. An MX
+        # chunk waits for its library: interpreted, its linear solver raises on a singular
+        # matrix ("Evaluation failed"; through the buffers, paths then end as garbage, as
+        # the trace test's chunk did on prr3), where the compiled code gives inf or NaN,
+        # which the step's guards handle
         self._maps: dict[int, Any] = {}
         self._pending: Any = None
         tag = f"homotopy_track:{sys.key}:{predictor}"
-        lib = (cc.start_library(tag, [self.chunk]) if sx or hermite
-               else cc.library(tag, [self.chunk]))
+        lib = cc.start_library(tag, [self.chunk]) if sx else cc.library(tag, [self.chunk])
         if isinstance(lib, dict):
             self.chunk = lib[self.chunk.name()]
         elif lib is not None:
