@@ -32,9 +32,13 @@ trick) and Duff et al. (2019, monodromy), for the closure of any square model:
   parts are polished by the real model's Newton step and returned as
   :class:`~optkin.results.KinResult`.
 
-The tracking is compiled: ``CHUNK`` predictor-corrector steps of a path are one CasADi
-Function (:class:`_Tracker`, built once per topology, mapped over the paths that are still
-running, their statuses read between calls). Systems of more than :data:`SMALL` unknowns
+The tracking is compiled: up to ``CHUNK`` predictor-corrector steps of a path, then three
+Newton steps at the target on the paths that have arrived, are one CasADi Function
+(:class:`_Tracker`, built once per topology: a fold over one step that skips stopped
+paths, mapped over the paths still running, their statuses read between calls; the scale
+of the unknowns an input, so that results never depend on the geometry seen first).
+Systems of up to :data:`SMALL` unknowns are compiled in the background, the interpreted
+Function answering meanwhile with the same numbers. Systems of more than :data:`SMALL` unknowns
 predict by a cubic Hermite extrapolation through the last two points and their tangents
 (one linear solve a step instead of RK4's four). Without a C compiler the RK4 steps run as
 a numpy loop over the paths (:func:`track`).
