@@ -114,13 +114,12 @@ def _select_rows(st: Structure, p: np.ndarray, mech: Mechanism, samples: int = 4
         rng = np.random.default_rng(seed)
         n = v.shape[0]
         Z = rng.uniform(-np.pi, np.pi, (samples, n))  # the same draws as one row at a time
-        f = st.cache[key] = (cc.FastFn(fm), Z, threading.Lock())
-    fm, Z, lock = f
+        is_len = np.concatenate([np.zeros(st.qa.shape[0], bool), st.x_length])
+        f = st.cache[key] = (cc.FastFn(fm), Z, is_len, threading.Lock())
+    fm, Z, is_len, lock = f
     n = Z.shape[1]
     m = phi.shape[0]
-    L = float(p[-1])
-    is_len = np.concatenate([np.zeros(st.qa.shape[0], bool), st.x_length])
-    Z = np.where(is_len[None, :], Z * L / np.pi, Z)
+    Z = Z * np.where(is_len, float(p[-1]) / np.pi, 1.0)
     with lock:
         out = fm(Z.ravel(), p)
         # column-major outputs: (m, samples) values, (m, n * samples) Jacobians
@@ -131,7 +130,8 @@ def _select_rows(st: Structure, p: np.ndarray, mech: Mechanism, samples: int = 4
         raise MechanismError("the closure rows are not finite at random configurations; "
                              "check the geometry", path=())
     scale = max(1.0, float(np.abs(G).max()))
-    if np.linalg.matrix_rank(G, tol=1e-9 * scale) == G.shape[0]:
+    sv = np.linalg.svd(G, compute_uv=False)  # (numpy's matrix_rank, without its overhead)
+    if int(np.sum(sv > 1e-9 * scale)) == G.shape[0]:
         # every row independent (the usual case): the loop below would keep them all,
         # since a subset of rows of a full-rank G has no smaller singular value
         return list(range(G.shape[0]))

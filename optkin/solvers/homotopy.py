@@ -768,7 +768,8 @@ def _structural(model) -> tuple[tuple[int, float], ...]:
     special = np.array([0.0, np.pi / 2, -np.pi / 2, np.pi, -np.pi, 1.0, -1.0])
     hit = np.abs(p[:, None] - special[None, :]) <= 1e-12
     rows = np.flatnonzero(hit.any(axis=1))
-    return tuple((sys.na + int(k), float(special[np.argmax(hit[k])])) for k in rows)
+    vals = special[hit[rows].argmax(axis=1)]
+    return tuple(zip((sys.na + rows).tolist(), vals.tolist()))
 
 
 def _random_theta(sys: _System, model, rng, c: np.ndarray | None = None) -> np.ndarray:
