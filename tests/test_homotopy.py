@@ -9,6 +9,8 @@ circle intersections; every path accounted for.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from test_assembly_modes import (
@@ -349,3 +351,46 @@ def test_results_do_not_depend_on_the_geometry_seen_first():
                           text=True, timeout=300, check=True).stdout
            for order in ("big-first", "alone")]
     assert out[0] == out[1] and len(out[0]) > 10
+
+
+_COLD = """
+import sys, json, numpy as np, optkin
+from optkin.model import get_model
+from optkin.solvers import homotopy as H
+from test_assembly_modes import DIET_A, DIET_B, DIET_L
+rng = np.random.default_rng(3)
+out, trackers = [], []
+for k in range(4):
+    if k < 2:
+        a, b = rng.uniform(-10, 10, (3, 2)), rng.uniform(-4, 4, (3, 2))
+        m, qa = optkin.mechanisms.rpr3(a, b), rng.uniform(6, 12, 3)
+    else:
+        A = DIET_A + rng.uniform(-0.03, 0.03, DIET_A.shape)
+        m, qa = optkin.mechanisms.stewart_gough(A, DIET_B), DIET_L
+    r = optkin.assembly_modes(m, qa, method="homotopy")
+    out.append([s.x.tolist() for s in r])
+    trackers.append(H._tracker(get_model(m)))
+print(json.dumps({"modes": out, "interpreted": [t._pending is not None for t in trackers]}))
+for t in trackers:  # let the libraries be stored for the next process
+    if t._pending is not None:
+        t._pending.wait()
+"""
+
+
+def test_interpreted_tracker_while_compiling_gives_the_compiled_numbers(tmp_path):
+    """With an empty cache the trackers compile in the background and the interpreted
+    ones answer meanwhile (a failed interpreted call is made again compiled); a second
+    process, which loads the compiled libraries, gives the same modes to the bit."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, OPTKIN_CACHE=str(tmp_path / "cache"),
+               PYTHONPATH=os.pathsep.join([str(Path(__file__).parent),
+                                           os.environ.get("PYTHONPATH", "")]))
+    runs = [json.loads(subprocess.run([sys.executable, "-c", _COLD], env=env, text=True,
+                                      capture_output=True, timeout=600, check=True).stdout)
+            for _ in range(2)]
+    assert any(runs[0]["interpreted"]) and not any(runs[1]["interpreted"])
+    assert runs[0]["modes"] == runs[1]["modes"] and sum(map(len, runs[0]["modes"])) > 8

@@ -611,6 +611,11 @@ class FastFn:
         self._trig()
         return self._res
 
+    def ok(self) -> bool:
+        """Whether the last call succeeded (an interpreted Function can fail where compiled
+        code returns inf or NaN: CasADi's QR solver on an exactly singular matrix)."""
+        return self._buf.ret() == 0
+
     def into(self, args: Sequence[np.ndarray], res: Sequence[np.ndarray]) -> None:
         """Evaluate with caller-owned contiguous float64 arrays (no copies; the fixed
         inputs keep their values)."""

@@ -446,18 +446,17 @@ class _Tracker:
         self.chunk = ca.Function("homotopy_chunk", [ms, mp], polish(last, mp))
         from ..model import compiled as cc
 
-        # an SX chunk (systems of up to 4 unknowns) compiles in the background: until the
-        # library is ready (about a second) runs use the interpreted chunk (a 3-RPR's call
-        # 11 ms instead of 1.4 ms; the same numbers to the bit on 100 random 3-RPR), so that
-        # a worker's first problem of a topology does not wait for the compiler. An MX
-        # chunk waits for its library: interpreted, its linear solver raises on a singular
-        # matrix ("Evaluation failed"; through the buffers, paths then end as garbage, as
-        # the trace test's chunk did on prr3), where the compiled code gives inf or NaN,
-        # which the step's guards handle
+        # compiled in the background: until the library is ready (about a second), runs
+        # use the interpreted chunk (a 3-RPR's call 11 ms instead of 1.4 ms, a 6-6
+        # platform's 0.4 s instead of 0.1 s; the same numbers to the bit on 100 random
+        # 3-RPR and 6 random 6-6 platforms), so that a worker's first problem of a
+        # topology does not wait for the compiler. An interpreted call can fail where the
+        # compiled code does not (CasADi's QR solver raises on an exactly singular matrix,
+        # the compiled one gives inf or NaN, which the step's guards handle): such a call
+        # waits for the library and is made again from the same state (:meth:`run`)
         self._maps: dict[int, Any] = {}
         self._pending: Any = None
-        tag = f"homotopy_track:{sys.key}:{predictor}"
-        lib = cc.start_library(tag, [self.chunk]) if sx else cc.library(tag, [self.chunk])
+        lib = cc.start_library(f"homotopy_track:{sys.key}:{predictor}", [self.chunk])
         if isinstance(lib, dict):
             self.chunk = lib[self.chunk.name()]
         elif lib is not None:
@@ -514,6 +513,12 @@ class _Tracker:
                                                        and deadline.expired()):
             fm = self._map(act.size)
             out, c = fm(S[act].ravel(), par)
+            if self._pending is not None and not fm.ok():  # interpreted, and it failed:
+                self._pending.wait()  # the compiled chunk, from the same state
+                self._poll()
+                if self._pending is None:
+                    fm = self._map(act.size)
+                    out, c = fm(S[act].ravel(), par)
             S[act] = out.reshape(act.size, W)
             cond[act] = c
             steps += CHUNK
