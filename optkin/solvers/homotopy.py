@@ -37,8 +37,8 @@ Newton steps at the target on the paths that have arrived, are one CasADi Functi
 (:class:`_Tracker`, built once per topology: a fold over one step that skips stopped
 paths, mapped over the paths still running, their statuses read between calls; the scale
 of the unknowns an input, so that results never depend on the geometry seen first).
-Systems of up to :data:`SMALL` unknowns are compiled in the background, the interpreted
-Function answering meanwhile with the same numbers. Systems of more than :data:`SMALL` unknowns
+It is compiled in the background, the interpreted Function answering meanwhile with the
+same numbers (a call it fails is made again compiled). Systems of more than :data:`SMALL` unknowns
 predict by a cubic Hermite extrapolation through the last two points and their tangents
 (one linear solve a step instead of RK4's four). Without a C compiler the RK4 steps run as
 a numpy loop over the paths (:func:`track`).
