@@ -215,10 +215,6 @@ class Topology:
                     self._store[key] = v
         return v
 
-    def peek(self, key: Hashable) -> Any:
-        """What :meth:`cached` keeps under ``key``, or None (nothing is built)."""
-        return self._store.get(key)
-
     def forget(self, key: Hashable) -> None:
         """Drop what :meth:`cached` keeps under ``key`` (a result that must not be reused)."""
         with self._lock:

@@ -669,7 +669,6 @@ def _endpoint_cond(sys: _System, X, status, th1, sc) -> np.ndarray:
 
 def _polish(sys: _System, X, status, t, steps, th1, sc) -> _Paths:
     """Newton at the target on the finite endpoints, and their condition numbers."""
-    cond = np.full(X.shape[0], np.inf)
     fin = np.flatnonzero(status == "finite")
     if fin.size:
         TH = np.repeat(th1[None, :], fin.size, axis=0)
@@ -679,11 +678,8 @@ def _polish(sys: _System, X, status, t, steps, th1, sc) -> _Paths:
             dx = _solve_scaled(J, H, Xf, sc)
             good = np.all(np.isfinite(dx), axis=1)
             Xf = Xf - np.where(good[:, None], dx, 0)
-        _, J, _ = sys.eval(Xf, TH, np.zeros_like(TH))
         X[fin] = Xf
-        with np.errstate(all="ignore"):
-            cond[fin] = np.linalg.cond(J * sc[None, None, :])
-    return _Paths(X, status, cond, t, steps)
+    return _Paths(X, status, _endpoint_cond(sys, X, status, th1, sc), t, steps)
 
 
 # ---------------------------------------------------------------------------------------
@@ -750,6 +746,9 @@ class StartSystem:
 
 _PATTERNS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
+#: The geometry values that make an entry structural (:func:`structural`).
+_SPECIAL = np.array([0.0, np.pi / 2, -np.pi / 2, np.pi, -np.pi, 1.0, -1.0])
+
 
 def structural(model) -> tuple[tuple[int, float], ...]:
     """The geometry entries (positions in the homotopy's parameters) taken to define the
@@ -759,8 +758,8 @@ def structural(model) -> tuple[tuple[int, float], ...]:
     and 6 of its 8 paths failed); in joint chains, the unit entries of joint axes (a
     3-RRR's randomised z axes left the rigid family: its solutions lay at |x| ~ 1e5 and
     monodromy found 2-3 of the 6). They stay fixed, real, in the start system, which is
-    built and stored per pattern; a geometry with another pattern gets its own (or, until
-    it is built, the generic pattern's shipped one: :func:`homotopy_modes`)."""
+    built and stored per pattern; a geometry with another pattern gets its own, or starts
+    from a shipped one of a wider family (:func:`covering_start`, :func:`homotopy_modes`)."""
     pat = _PATTERNS.get(model)
     if pat is None:
         pat = _PATTERNS[model] = _structural(model)
@@ -770,10 +769,9 @@ def structural(model) -> tuple[tuple[int, float], ...]:
 def _structural(model) -> tuple[tuple[int, float], ...]:
     sys = _system(model)
     p = np.asarray(model.p, dtype=float)[sys.p_used]
-    special = np.array([0.0, np.pi / 2, -np.pi / 2, np.pi, -np.pi, 1.0, -1.0])
-    hit = np.abs(p[:, None] - special[None, :]) <= 1e-12
+    hit = np.abs(p[:, None] - _SPECIAL[None, :]) <= 1e-12
     rows = np.flatnonzero(hit.any(axis=1))
-    vals = special[hit[rows].argmax(axis=1)]
+    vals = _SPECIAL[hit[rows].argmax(axis=1)]
     return tuple(zip((sys.na + rows).tolist(), vals.tolist()))
 
 
@@ -914,7 +912,6 @@ def covering_start(model) -> StartSystem | None:
     geometry lies in its family). Looked for once per topology and pattern."""
     pat = structural(model)
     sys = _system(model)
-    special = np.array([0.0, np.pi / 2, -np.pi / 2, np.pi, -np.pi, 1.0, -1.0])
 
     def find():
         import io
@@ -931,7 +928,7 @@ def covering_start(model) -> StartSystem | None:
             if theta.shape != (sys.nth,) or len(shape) != 2 or shape[1] != sys.n:
                 continue
             g = theta[sys.na:sys.na + sys.np_]
-            hit = (g.imag == 0) & np.isin(g.real, special)
+            hit = (g.imag == 0) & np.isin(g.real, _SPECIAL)
             theirs = {sys.na + int(k): float(g[k].real) for k in np.flatnonzero(hit)}
             if len(theirs) <= size or any(mine.get(k) != v for k, v in theirs.items()):
                 continue
@@ -1142,8 +1139,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     out.sort(key=lambda r: tuple(np.round(r.x / sc, 9)))
     n_fail = int(np.sum(P.status == "failed"))
     n_inf = int(np.sum(P.status == "at_infinity"))
-    bound = model.topology.cached("homotopy:bound", lambda: _enum.known_bound(model) or -1)
-    bound = None if bound == -1 else bound
+    (bound,) = model.topology.cached("homotopy:bound", lambda: (_enum.known_bound(model),))
     short = bound is not None and start.root_count < bound  # monodromy missed some
     cut = start.stopped == "time"
     # without a known bound, a start system is complete only by the trace test
