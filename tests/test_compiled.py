@@ -370,3 +370,121 @@ def test_assembly_modes_compiles_in_the_background(tmp_path, monkeypatch):
     for a, b in zip(first, second):
         np.testing.assert_array_equal(a.x, b.x)
     optkin.model.clear_cache()
+
+
+# ------------------------------------------------------------ one build per shared cache
+_SLOW_CC = """#!/bin/sh
+echo "$$" >> {log}
+sleep {pause}
+exec {cc} "$@"
+"""
+
+
+def _slow_compiler(tmp_path, pause: float = 1.0):
+    """A compiler that logs each call (one line) and takes ``pause`` s longer."""
+    log = tmp_path / "calls.log"
+    fake = tmp_path / "slowcc"
+    fake.write_text(_SLOW_CC.format(log=log, pause=pause, cc=cc.find_compiler()))
+    fake.chmod(0o755)
+    return fake, log
+
+
+_BUILD_ONE = textwrap.dedent("""
+    import sys, time
+    from optkin import mechanisms as lib
+    from optkin.model import compiled as cc
+    from optkin.model.core import Model
+    f = Model(lib.rpr3(base=[[0, 0], [10, 0], [3, 8]], platform=[[0, 0], [2, 0], [1, 1.5]])
+              ).topology.phi
+    go = float(sys.argv[1])
+    while time.time() < go:
+        time.sleep(0.005)
+    if sys.argv[2] == "sync":
+        out = cc.library("shared:test", [f])
+    else:
+        out = cc.start_library("shared:test", [f])
+        out = out if isinstance(out, dict) else out.wait(60)
+    print("compiled" if out and out[f.name()].is_a("External") else "interpreted")
+""")
+
+
+@needs_cc
+@pytest.mark.parametrize("how", ["sync", "background"])
+def test_processes_sharing_a_cache_build_a_library_once(tmp_path, how):
+    """Three processes ask for the same missing library at the same moment: the compiler
+    runs once (the others wait for its library) and all three load the compiled code."""
+    import time
+
+    fake, log = _slow_compiler(tmp_path)
+    cache = tmp_path / "cache"
+    cache.mkdir(mode=0o700)
+    env = dict(os.environ, OPTKIN_CACHE=str(cache), OPTKIN_CC=str(fake))
+    go = time.time() + 3.0  # after every interpreter has imported optkin
+    procs = [subprocess.Popen([sys.executable, "-c", _BUILD_ONE, str(go), how], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for _ in range(3)]
+    outs = [p.communicate(timeout=120) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0, 0], [o[1][-800:] for o in outs]
+    assert [o[0].strip() for o in outs] == ["compiled"] * 3
+    assert len(log.read_text().split()) == 1
+    assert not [p.name for p in cache.iterdir() if p.suffix == ".lock"
+                or p.name.startswith(".build-")]
+
+
+@needs_cc
+def test_an_abandoned_build_lock_is_taken_over(tmp_path, monkeypatch):
+    """A lock left by a process that died (this host) does not stop the build; one of a
+    live process is honoured until it is stale."""
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+    f = Model(rpr()).topology.phi
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    key = cc._digest("lock:test", [f])
+    path = cc._library_path(tmp_path, "lock:test", key)
+    lock = path.with_suffix(".lock")
+    fd = os.open(lock, os.O_WRONLY | os.O_CREAT, 0o600)
+    os.write(fd, f"{dead.pid} {cc._HOST}".encode())
+    os.close(fd)
+    lib_fns = cc.library("lock:test", [f])
+    assert lib_fns is not None and lib_fns[f.name()].is_a("External")
+    assert not lock.exists()
+
+    alive = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        key2 = cc._digest("lock:test2", [f])
+        path2 = cc._library_path(tmp_path, "lock:test2", key2)
+        fd = os.open(path2.with_suffix(".lock"), os.O_WRONLY | os.O_CREAT, 0o600)
+        os.write(fd, f"{alive.pid} {cc._HOST}".encode())
+        os.close(fd)
+        pending = cc.start_library("lock:test2", [f])
+        assert isinstance(pending, cc.PendingLibrary) and not pending.own
+        assert pending.poll() is None  # waits for the other process
+        monkeypatch.setattr(cc, "LOCK_STALE", 0.0)  # now it counts as abandoned
+        pending._next_look = 0.0
+        out = pending.poll()
+        out = out if out is not None else pending.wait(60)
+        assert isinstance(out, dict) and out[f.name()].is_a("External")
+    finally:
+        alive.kill()
+        alive.wait()
+
+
+@needs_cc
+def test_a_background_build_lands_though_nobody_asks(tmp_path, monkeypatch):
+    """The library of a background build is installed when the compiler ends even if its
+    owner never polls (a topology whose last problem ran before the compiler finished)."""
+    import time
+
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+    f = Model(rpr()).topology.phi
+    pending = cc.start_library("land:test", [f])
+    assert isinstance(pending, cc.PendingLibrary) and pending.own
+    del pending
+    key = cc._digest("land:test", [f])
+    path = cc._library_path(tmp_path, "land:test", key)
+    end = time.monotonic() + 60
+    while cc._load(path, "land:test", key, [f]) is None and time.monotonic() < end:
+        time.sleep(0.05)
+    assert cc._load(path, "land:test", key, [f]) is not None
+    time.sleep(0.2)
+    assert sorted(p.suffix for p in tmp_path.iterdir()) == [".json", ".so"]

@@ -28,6 +28,15 @@ others, the record names the requested tag and key, and the library's bytes matc
 digest; anything else (a truncated, garbled, foreign or copied library) is rebuilt, never
 loaded. (On platforms without user ids, such as Windows, only the record is checked.)
 
+Processes sharing a cache build each library once: the builder holds ``<name>.lock``
+(created exclusively) while its compiler runs; another process that needs the library
+meanwhile waits for it (:func:`library`) or keeps its interpreted Functions until it lands
+(:func:`start_library`) instead of compiling it a second time. A lock whose process is
+gone (same host) or older than :data:`LOCK_STALE` seconds is taken over. A background
+build is installed by a thread of its own when its compiler ends, whether or not its
+owner is still asking; a process that exits first stops its compilers and removes their
+files and locks.
+
 Environment variables
 ---------------------
 ``OPTKIN_COMPILE``
@@ -55,7 +64,9 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 import warnings
+import weakref
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -89,6 +100,9 @@ _OPEN_FLAGS = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLO
 _RECORD_MAX = 1 << 16  # bytes; a longer record is not one of ours
 _tmp_cache: tuple[int, Path] | None = None  # (pid, dir): this process's private fallback
 _warned: set[tuple[str, str]] = set()
+#: Seconds after which another process's build lock is presumed abandoned.
+LOCK_STALE = 300.0
+_HOST = platform.node()
 
 
 def compile_mode() -> str:
@@ -412,12 +426,91 @@ def library(
     return libraries([(tag, funcs)], build)[0]
 
 
+def _lock_path(lib: Path) -> Path:
+    return lib.with_suffix(".lock")
+
+
+def _holder_gone(lock: Path) -> bool:
+    """Whether the build lock ``lock`` is abandoned: older than :data:`LOCK_STALE`, or
+    written by a process of this host that no longer exists (a missing lock counts)."""
+    try:
+        st = os.lstat(lock)
+        if time.time() - st.st_mtime > LOCK_STALE:
+            return True
+        pid, _, host = _read_private(lock, 256).decode(errors="replace").partition(" ")
+    except FileNotFoundError:
+        return True
+    except (OSError, ValueError):  # unreadable or not ours: honoured until it is stale
+        return False
+    if host.strip() != _HOST or not pid.isdigit():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return True
+    except OSError:  # exists, owned by someone else
+        return False
+    return False
+
+
+def _claim(lib: Path) -> bool:
+    """Claim the build of ``lib`` for this process (its lock file, created exclusively);
+    False while another live process holds it. A lock that cannot be made at all (a
+    read-only cache, say) does not stop the build: the install is atomic anyway."""
+    lock = _lock_path(lib)
+    for _ in range(3):
+        try:
+            fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_EXCL
+                         | getattr(os, "O_NOFOLLOW", 0), 0o600)
+        except FileExistsError:
+            if not _holder_gone(lock):
+                return False
+            try:  # abandoned: take it over (another process may race us to it: retry)
+                os.unlink(lock)
+            except FileNotFoundError:
+                pass
+            except OSError:
+                return True
+            continue
+        except OSError:
+            return True
+        with os.fdopen(fd, "w") as f:
+            f.write(f"{os.getpid()} {_HOST}")
+        return True
+    return False
+
+
+def _release(lib: Path) -> None:
+    try:
+        pid = _read_private(_lock_path(lib), 256).decode(errors="replace").partition(" ")[0]
+        if pid == str(os.getpid()):
+            os.unlink(_lock_path(lib))
+    except (OSError, ValueError):
+        pass
+
+
+def _await_other(path: Path, tag: str, key: str, funcs: Sequence[ca.Function],
+                 timeout: float) -> dict[str, ca.Function] | None:
+    """Wait (at most ``timeout`` s) for the library another process is building; None
+    when its build ended without one (or never ends)."""
+    end = time.monotonic() + timeout
+    pause = 0.01
+    while True:
+        gone = _holder_gone(_lock_path(path))  # first: a library installed before the lock
+        out = _load(path, tag, key, funcs)  # is removed is seen by the next line
+        if out is not None or gone or time.monotonic() > end:
+            return out
+        time.sleep(pause)
+        pause = min(2 * pause, 0.1)
+
+
 def libraries(
     requests: Sequence[tuple[str, Sequence[ca.Function]]], build: bool = True
 ) -> list[dict[str, ca.Function] | None]:
     """:func:`library` for several libraries; the missing ones are compiled in parallel
     (one compiler process each; the C code is generated in this thread). A cached library
-    whose record does not vouch for it is rebuilt like a missing one."""
+    whose record does not vouch for it is rebuilt like a missing one; one that another
+    process is building is waited for."""
     out: list[dict[str, ca.Function] | None] = [None] * len(requests)
     if compile_mode() == "off" or not requests:
         return out
@@ -439,101 +532,180 @@ def libraries(
         log.debug("optkin: no C compiler found; using interpreted Functions")
         return out
     with _BUILD_LOCK, tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:
-        procs = []
+        procs, others = [], []
         for k, tag, key, path, funcs in todo:
             out[k] = _load(path, tag, key, funcs)  # built meanwhile by another thread?
             if out[k] is not None:
+                continue
+            if not _claim(path):  # another process is building it
+                others.append((k, tag, key, path, funcs))
                 continue
             try:
                 so, p = _start_compiler(cc, tmp, path, funcs, stdout=subprocess.PIPE,
                                         stderr=subprocess.PIPE, text=True)
                 procs.append((k, tag, key, path, funcs, so, p))
             except (OSError, RuntimeError) as exc:
+                _release(path)
                 log.debug("optkin: generating %s failed (%s)", path.stem, exc)
         for k, tag, key, path, funcs, so, p in procs:
             try:
-                _, err = p.communicate(timeout=600)
-            except subprocess.SubprocessError as exc:
-                p.kill()
-                log.debug("optkin: compiling %s failed (%s)", path.name, exc)
-                continue
-            if p.returncode != 0:
-                log.debug("optkin: compiler failed: %s", err[-2000:])
-                continue
-            try:
-                _write_record(path, so, tag, key, Path(tmp))
-            except OSError as exc:
-                log.debug("optkin: cannot store %s (%s)", path, exc)
-                continue
+                try:
+                    _, err = p.communicate(timeout=600)
+                except subprocess.SubprocessError as exc:
+                    p.kill()
+                    p.wait()
+                    log.debug("optkin: compiling %s failed (%s)", path.name, exc)
+                    continue
+                if p.returncode != 0:
+                    log.debug("optkin: compiler failed: %s", err[-2000:])
+                    continue
+                try:
+                    _write_record(path, so, tag, key, Path(tmp))
+                except OSError as exc:
+                    log.debug("optkin: cannot store %s (%s)", path, exc)
+                    continue
+            finally:
+                _release(path)
             out[k] = _load(path, tag, key, funcs)
+    for k, tag, key, path, funcs in others:
+        out[k] = _await_other(path, tag, key, funcs, 600.0)
+        if out[k] is None:  # its build failed or was abandoned: ours, once
+            out[k] = libraries([(tag, funcs)], build)[0] if _holder_gone(
+                _lock_path(path)) else None
     return out
 
 
-class PendingLibrary:
-    """A library being compiled in the background (:func:`start_library`).
+_BUILDS: weakref.WeakSet = weakref.WeakSet()  # background builds of this process
 
-    The C code was generated in the calling thread; only the compiler runs meanwhile, as a
-    separate process, so nothing else in this process waits for it. :meth:`poll` returns
-    None while it runs, then (once) the loaded Functions, or ``False`` when the build
-    failed; afterwards it keeps returning that outcome.
+
+@atexit.register
+def _stop_builds() -> None:  # a build nobody will use: stop it, leave nothing behind
+    for b in list(_BUILDS):
+        b.stop()
+
+
+class _Build:
+    """This process's background compiler for one library; a thread of its own installs
+    the library in the cache when the compiler ends (no CasADi call there: loading is for
+    the owner's thread), removes the build directory and releases the lock."""
+
+    def __init__(self, pending: PendingLibrary, tmp: str, so: Path,
+                 proc: subprocess.Popen) -> None:
+        self.tmp, self.so, self.proc = tmp, so, proc
+        self.installed = False
+        self.done = threading.Event()
+        _BUILDS.add(self)
+        threading.Thread(target=self._install, args=(pending.tag, pending.key, pending.path),
+                         name="optkin-install", daemon=True).start()
+
+    def _install(self, tag: str, key: str, path: Path) -> None:
+        try:
+            self.proc.wait()
+            if self.proc.returncode != 0:
+                try:
+                    err = (Path(self.tmp) / "compiler.log").read_bytes()[-2000:]
+                except OSError:
+                    err = b""
+                log.debug("optkin: compiler failed: %s", err.decode(errors="replace"))
+            else:
+                _write_record(path, self.so, tag, key, Path(self.tmp))
+                self.installed = True
+        except OSError as exc:
+            log.debug("optkin: cannot store %s (%s)", path, exc)
+        finally:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            _release(path)
+            self.done.set()
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            try:
+                self.proc.kill()
+            except OSError:
+                pass
+        self.done.wait(5.0)
+
+
+class PendingLibrary:
+    """A library being compiled in the background (:func:`start_library`), by this
+    process or by another one sharing the cache.
+
+    This process's build: the C code was generated in the calling thread; only the
+    compiler runs meanwhile, as a separate process, and the library is installed in the
+    cache when it ends, whether or not anyone asks (it is stopped only when the process
+    exits). Another process's build: :meth:`poll` looks for its library (a file-system
+    check, at most every 20 ms) and takes the build over if that process gave up.
+    :meth:`poll` returns None while the build runs, then (once) the loaded Functions, or
+    ``False`` when the build failed; afterwards it keeps returning that outcome.
     """
 
-    def __init__(self, tag: str, key: str, path: Path, funcs: Sequence[ca.Function],
-                 tmp: str, so: Path, proc: subprocess.Popen) -> None:
+    def __init__(self, tag: str, key: str, path: Path, funcs: Sequence[ca.Function]) -> None:
         self.tag, self.key, self.path, self.funcs = tag, key, path, list(funcs)
-        self._tmp, self._so, self._proc = tmp, so, proc
+        self._build: _Build | None = None
         self._out: dict[str, ca.Function] | bool | None = None
+        self._next_look = 0.0
+
+    @property
+    def own(self) -> bool:
+        """Whether this process runs the compiler (else another process does)."""
+        return self._build is not None
 
     def poll(self) -> dict[str, ca.Function] | bool | None:
         if self._out is not None:
             return self._out
-        if self._proc.poll() is None:
+        if self._build is not None:
+            if not self._build.done.is_set():
+                return None
+            self._out = (self._build.installed and _load(self.path, self.tag, self.key,
+                                                         self.funcs)) or False
+            return self._out
+        now = time.monotonic()
+        if now < self._next_look:
             return None
-        return self._finish()
-
-    def wait(self, timeout: float = 600.0) -> dict[str, ca.Function] | bool:
-        try:
-            self._proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            self._proc.kill()
-            self._proc.wait()
-        out = self.poll()
-        return False if out is None else out
-
-    def _finish(self) -> dict[str, ca.Function] | bool:
-        try:
-            if self._proc.returncode != 0:
-                err = (Path(self._tmp) / "compiler.log").read_bytes()[-2000:]
-                log.debug("optkin: compiler failed: %s", err.decode(errors="replace"))
+        self._next_look = now + 0.02
+        gone = _holder_gone(_lock_path(self.path))  # first: see _await_other
+        lib = _load(self.path, self.tag, self.key, self.funcs)
+        if lib is not None:
+            self._out = lib
+        elif gone:  # the other process gave up: build it here
+            nxt = start_library(self.tag, self.funcs)
+            if isinstance(nxt, dict):
+                self._out = nxt
+            elif nxt is None:
                 self._out = False
-            else:
-                _write_record(self.path, self._so, self.tag, self.key, Path(self._tmp))
-                self._out = _load(self.path, self.tag, self.key, self.funcs) or False
-        except OSError as exc:
-            log.debug("optkin: cannot store %s (%s)", self.path, exc)
-            self._out = False
-        finally:
-            shutil.rmtree(self._tmp, ignore_errors=True)
+            elif nxt._build is not None:
+                self._build, nxt._build = nxt._build, None
         return self._out
 
-    def __del__(self) -> None:  # a build nobody waits for: stop it, leave nothing behind
-        try:
-            if self._out is None and self._proc.poll() is None:
-                self._proc.kill()
-                self._proc.wait()
-            if self._out is None:
-                shutil.rmtree(self._tmp, ignore_errors=True)
-        except Exception:  # noqa: BLE001 - interpreter shutdown
-            pass
+    def wait(self, timeout: float = 600.0) -> dict[str, ca.Function] | bool:
+        """The outcome, waiting at most ``timeout`` s (then this process's compiler is
+        stopped and the outcome is ``False``)."""
+        end = time.monotonic() + timeout
+        while True:
+            out = self.poll()
+            if out is not None:
+                return out
+            left = end - time.monotonic()
+            if left <= 0:
+                if self._build is not None:
+                    self._build.stop()
+                    return self.poll() or False
+                self._out = False
+                return False
+            if self._build is not None:
+                self._build.done.wait(min(left, 1.0))
+            else:
+                time.sleep(min(left, 0.02))
 
 
 def start_library(tag: str, funcs: Sequence[ca.Function]
                   ) -> dict[str, ca.Function] | PendingLibrary | None:
     """:func:`library` without waiting for the compiler: the cached library when there is
-    one, else a :class:`PendingLibrary` whose compiler runs in the background, else None
-    (compiling off, no cache directory, no compiler, or the C code could not be
-    generated). The caller keeps using the interpreted Functions until :meth:`poll`
-    gives the compiled ones."""
+    one, else a :class:`PendingLibrary` whose compiler runs in the background (or that
+    waits for another process building the same library), else None (compiling off, no
+    cache directory, no compiler, or the C code could not be generated). The caller keeps
+    using the interpreted Functions until :meth:`PendingLibrary.poll` gives the compiled
+    ones."""
     if compile_mode() == "off":
         return None
     d = cache_dir()
@@ -547,6 +719,8 @@ def start_library(tag: str, funcs: Sequence[ca.Function]
     cc = find_compiler()
     if cc is None:
         return None
+    if not _claim(path):
+        return PendingLibrary(tag, key, path, funcs)
     tmp = tempfile.mkdtemp(dir=d, prefix=".build-")
     try:
         with open(Path(tmp) / "compiler.log", "wb") as log_file:  # no pipe to fill up
@@ -555,8 +729,11 @@ def start_library(tag: str, funcs: Sequence[ca.Function]
     except (OSError, RuntimeError) as exc:
         log.debug("optkin: generating %s failed (%s)", path.stem, exc)
         shutil.rmtree(tmp, ignore_errors=True)
+        _release(path)
         return None
-    return PendingLibrary(tag, key, path, funcs, tmp, so, proc)
+    out = PendingLibrary(tag, key, path, funcs)
+    out._build = _Build(out, tmp, so, proc)
+    return out
 
 
 class FastFn:
