@@ -14,35 +14,43 @@ in three equal groups, drawn from ``numpy.random.default_rng(seed)``
 The leg lengths are computed here with numpy (|p + R b_i - a_i|), not by optkin.
 
 For each worker count P up to the machine's cores, ``optkin run --no-pictures -q --jobs P``
-runs the batch in a fresh process with its own empty compiled-code cache, and so does the
-same batch sent to a Dask ``LocalCluster(P workers, 1 thread each)`` with ``--scheduler``.
-``extra_info`` holds the wall times, the speed-ups over ``--jobs 1`` (the in-run baseline),
-the efficiencies, whether the results equal those of ``--jobs 1``, and the prediction of
-:func:`predict`, a model fed with what the runs measured:
+runs the batch in a fresh process, and so does the same batch sent to a Dask
+``LocalCluster(P workers, 1 thread each)`` with ``--scheduler``; each **cold** (its own
+empty compiled-code cache: every topology's code is compiled during the run, once per
+cache) and **warm** (a cache filled by an earlier run, the state of every run after a
+user's first). ``extra_info`` holds the wall times, the speed-ups over ``--jobs 1`` in the
+same state (the in-run baseline), the efficiencies, whether the results equal those of
+the first run, and the predictions of :func:`predict`, a model fed with what the runs
+measured:
 
-* the unit costs: each problem's ``elapsed`` in the ``--jobs 1`` run (the worker's time to
-  fetch the model and run the tasks, from the result files);
-* the warm-up of a worker: for each topology (library mechanism), the first unit's cost
-  over the median of the others, in the order the runner ran them; every worker pays it
-  for every topology it meets, so the model charges it to every worker;
+* the unit costs: each problem's ``elapsed`` in the warm ``--jobs 1`` run (the worker's
+  time to fetch the model and run the tasks, from the result files), with the runner's
+  estimated cost and topology group of each;
+* the set-up of a topology in a worker: the first unit's cost over the median of the
+  others, in the order the runner ran them (warm run); a worker pays it for every
+  topology it meets;
+* the compile of a topology (cold): the same excess in the cold run less the warm one,
+  paid once per cache; the model charges the wait to every worker that meets the topology
+  before its code lands (an upper bound: those workers run the interpreted code
+  meanwhile);
 * the fixed cost: the wall time of a run of one trivial problem (a four-bar's forward
   model) less that problem's own time: start-up of the command line and of a worker, the
   summary; paid once whatever the number of workers;
 * the overhead per unit outside the worker (messages, the parent writing the result): the
-  rest of the first ``--jobs 1`` run's wall time, shared among its units;
+  rest of the warm ``--jobs 1`` run's wall time, shared among its units;
 * the parent's CPU time per unit (``time.process_time`` of the command-line process over
-  the ``--jobs 1`` run, which excludes the workers): the parent handles the results one
-  after the other, so no schedule beats ``n`` times it;
+  that run, which excludes the workers): the parent handles the results one after the
+  other, so no schedule beats ``n`` times it;
 
-and predicts the makespan at P workers as the fixed cost plus the longer of the
-longest-processing-time schedule of the units (each worker starting with the warm-up) and
-the parent's serial share. The same model predicts the ``--jobs 2`` run measured here, and
-the closing figures give both. ``cpu_inflation`` is the measured ratio of the workers'
-summed unit costs with 2 workers to those with 1 (memory and cache shared between cores):
-the 16- and 64-worker predictions are given without it and with it.
+and predicts the makespan at P workers by simulating the runner's own scheduling policy
+(:class:`optkin.problems.costs.Affinity`) event by event, plus the fixed cost, or the
+parent's serial share when longer. The same model predicts the ``--jobs 2`` runs measured
+here. ``cpu_inflation_at_2`` is the measured ratio of the workers' summed unit costs with 2
+workers to those with 1 (memory, caches and, cold, the compiler sharing the cores): the
+16- and 64-worker predictions are given without it and with it.
 
 optkin's bytecode is written first (:func:`_byte_compile`). Run it with
-``python -m pytest benchmarks/test_scaling.py`` (about 3-5 minutes here;
+``python -m pytest benchmarks/test_scaling.py`` (about 5 minutes here;
 ``OPTKIN_SCALING_ROUNDS=3`` repeats the runs, interleaved, and reports medians), or rebuild
 the batch with ``python benchmarks/test_scaling.py DIR [N]``.
 """
@@ -157,9 +165,10 @@ def run_batch(batch: Path, out: Path, cache: Path, jobs: int = 1,
     return wall, (cpu[-1] if cpu else float("nan"))
 
 
-def unit_costs(out: Path, batch: Path) -> list[tuple[str, str, float]]:
-    """(problem, topology, elapsed) of every result of a run of ``batch``, in the order a
-    one-worker run starts them (the runner's longest-first order, from its own function)."""
+def unit_costs(out: Path, batch: Path) -> list[tuple[str, str, float, float]]:
+    """(problem, topology, elapsed, estimated cost) of every result of a run of ``batch``,
+    in the order a one-worker run starts them (the runner's own units and policy)."""
+    from optkin.problems.costs import Affinity
     from optkin.problems.runner import _units, find_problem_files
 
     rows = {}
@@ -169,8 +178,11 @@ def unit_costs(out: Path, batch: Path) -> list[tuple[str, str, float]]:
             rows[data["problem"]] = (data["input"]["mechanism"].get("name", "?"),
                                      float(data["elapsed"]))
     todo = [(i, i.path.read_bytes()) for i in find_problem_files([str(batch)])]
-    order = [u.spec["display"] for u in _units(todo, False, split=False)]
-    return [(name, *rows[name]) for name in order if name in rows]
+    jobs = _units(todo, False, split=False)
+    policy = Affinity([(j.cost, j.group) for j in jobs])
+    order = [jobs[policy.take(0)] for _ in jobs]
+    return [(j.spec["display"], *rows[j.spec["display"]], j.cost) for j in order
+            if j.spec["display"] in rows]
 
 
 #: Provenance, not results: times, where it ran, and whether a step ran compiled (the first
@@ -203,42 +215,64 @@ def results_of(out: Path) -> dict[str, object]:
 # The model
 # ---------------------------------------------------------------------------------------
 
-def warmups(units: list[tuple[str, str, float]]) -> tuple[dict[str, float], list[float]]:
+def warmups(units) -> tuple[dict[str, float], list[float]]:
     """Per topology, the first unit's cost over the median of the others; and the unit
     costs with that excess removed (the first unit costs the median)."""
     by: dict[str, list[float]] = {}
-    for _, topo, c in units:
+    for _, topo, c, _ in units:
         by.setdefault(topo, []).append(c)
     excess = {t: max(0.0, cs[0] - float(np.median(cs[1:]))) if len(cs) > 1 else 0.0
               for t, cs in by.items()}
     seen: set[str] = set()
     costs = []
-    for _, topo, c in units:
+    for _, topo, c, _ in units:
         costs.append(c - excess[topo] if topo not in seen else c)
         seen.add(topo)
     return excess, costs
 
 
-def predict(costs, fixed: float, per_unit: float, warm: float, parent: float, workers: int,
-            n: int, inflation: float = 1.0, seed: int = 0) -> dict[str, float]:
-    """Predicted wall time and efficiency of a batch of ``n`` units drawn from ``costs``.
+def predict(units, costs, fixed: float, per_unit: float, warm: dict[str, float],
+            parent: float, workers: int, n: int, compile_: dict[str, float] | None = None,
+            inflation: float = 1.0) -> dict[str, float]:
+    """Predicted wall time and efficiency of a batch of ``n`` units like ``units``.
 
-    T(P) = fixed + max(LPT makespan of (c_i * inflation + per_unit) on P workers that each
-    start with ``warm``, n * parent); the efficiency is T(1) / (P T(P)) with T(1) the same
-    model at one worker and no inflation. The ``n`` costs are the measured ones repeated
-    (a remainder resampled with ``seed``), so the distribution is the measured one.
+    The batch: the measured units repeated (their topologies, estimated costs and measured
+    ``costs``) up to ``n``. The schedule: the runner's own policy
+    (:class:`optkin.problems.costs.Affinity`, fed with the estimated costs) on ``workers``
+    workers, event by event; a unit lasts its cost times ``inflation`` plus ``per_unit``,
+    plus ``warm[topology]`` the first time a worker meets its topology. With ``compile_``
+    (a cold cache), a topology's compiled code lands ``compile_[topology]`` seconds after
+    the first worker meets it, and every worker that meets it before then is charged the
+    wait (an upper bound: meanwhile it runs the interpreted code). T(P) = fixed +
+    max(makespan, n * parent); the efficiency is T(1) / (P T(P)), T(1) the same model at
+    one worker without inflation.
     """
-    costs = np.asarray(costs, dtype=float)
-    reps = n // len(costs)
-    rest = np.random.default_rng(seed).choice(costs, n - reps * len(costs), replace=False)
-    big = np.r_[np.tile(costs, reps), rest]
+    from optkin.problems.costs import Affinity
+
+    reps = -(-n // len(units))
+    big = [(topo, est, c) for _ in range(reps) for (_, topo, _, est), c in zip(units, costs)]
+    big = big[:n]
+    order = sorted(range(n), key=lambda i: -big[i][1])  # the runner's order: LPT, stable
 
     def makespan(P: int, infl: float) -> float:
-        loads = [warm] * P
-        heapq.heapify(loads)
-        for c in sorted(big * infl + per_unit, reverse=True):
-            heapq.heappush(loads, heapq.heappop(loads) + c)
-        return fixed + max(max(loads), n * parent)
+        policy = Affinity([(big[i][1], big[i][0]) for i in order])
+        free = [(0.0, w) for w in range(P)]
+        seen: list[set[str]] = [set() for _ in range(P)]
+        ready: dict[str, float] = {}
+        end = 0.0
+        while len(policy):
+            t, w = heapq.heappop(free)
+            topo, _, c = big[order[policy.take(w)]]
+            d = c * infl + per_unit
+            if topo not in seen[w]:
+                seen[w].add(topo)
+                d += warm.get(topo, 0.0)
+                if compile_ is not None:
+                    r = ready.setdefault(topo, t + compile_.get(topo, 0.0))
+                    d += max(0.0, r - t)
+            end = max(end, t + d)
+            heapq.heappush(free, (t + d, w))
+        return fixed + max(end, n * parent)
 
     t1 = makespan(1, 1.0)
     tp = makespan(workers, inflation)
@@ -284,69 +318,86 @@ def test_scaling(benchmark, tmp_path):
         have_dask = True
     except ImportError:
         have_dask = False
+    filled = tmp_path / "cache_filled"  # the warm runs' cache: filled by a first run
+    run_batch(batch, tmp_path / "fill", filled)
 
     def measure():
         walls: dict[str, list[float]] = {}
         same: dict[str, bool] = {}
-        ref = units = parent_cpu = None
+        ref = None
+        units: dict[str, list] = {}
+        parent_cpu: dict[str, float] = {}
         sums: dict[str, list[float]] = {}
         for r in range(ROUNDS):  # interleaved, so that a slow spell of the machine hits all
-            for P in counts:
-                key = f"pool{P}"
-                out = tmp_path / f"{key}_{r}"
-                wall, cpu = run_batch(batch, out, tmp_path / f"cache_{key}_{r}", jobs=P)
-                walls.setdefault(key, []).append(wall)
-                sums.setdefault(key, []).append(sum(c for _, _, c in unit_costs(out, batch)))
-                if ref is None:
-                    ref, units, parent_cpu = results_of(out), unit_costs(out, batch), cpu
-                same[key] = same.get(key, True) and results_of(out) == ref
-            for P in counts if have_dask else ():
-                key = f"dask{P}"
-                out = tmp_path / f"{key}_{r}"
-                cache = tmp_path / f"cache_{key}_{r}"
-                with _local_cluster(P, cache) as cluster:
-                    wall, _ = run_batch(batch, out, cache,
-                                        scheduler=cluster.scheduler_address)
-                walls.setdefault(key, []).append(wall)
-                same[key] = same.get(key, True) and results_of(out) == ref
+            for state in ("cold", "warm"):
+                for P in counts:
+                    key = f"pool{P}_{state}"
+                    out = tmp_path / f"{key}_{r}"
+                    cache = filled if state == "warm" else tmp_path / f"cache_{key}_{r}"
+                    wall, cpu = run_batch(batch, out, cache, jobs=P)
+                    walls.setdefault(key, []).append(wall)
+                    u = unit_costs(out, batch)
+                    sums.setdefault(key, []).append(sum(c for _, _, c, _ in u))
+                    if P == 1 and state not in units:
+                        units[state], parent_cpu[state] = u, cpu
+                    if ref is None:
+                        ref = results_of(out)
+                    same[key] = same.get(key, True) and results_of(out) == ref
+                for P in counts if have_dask else ():
+                    key = f"dask{P}_{state}"
+                    out = tmp_path / f"{key}_{r}"
+                    cache = filled if state == "warm" else tmp_path / f"cache_{key}_{r}"
+                    with _local_cluster(P, cache) as cluster:
+                        wall, _ = run_batch(batch, out, cache,
+                                            scheduler=cluster.scheduler_address)
+                    walls.setdefault(key, []).append(wall)
+                    same[key] = same.get(key, True) and results_of(out) == ref
         # the fixed cost: a run of one trivial problem, less that problem's own time
         triv = tmp_path / "triv"
         make_trivial(triv, 1)
-        t_one, _ = run_batch(triv, tmp_path / "triv_out", tmp_path / "cache_triv")
-        fixed = max(0.0, t_one - sum(c for _, _, c in unit_costs(tmp_path / "triv_out", triv)))
+        t_one, _ = run_batch(triv, tmp_path / "triv_out", filled)
+        fixed = max(0.0, t_one - sum(c for _, _, c, _ in
+                                     unit_costs(tmp_path / "triv_out", triv)))
         return walls, same, units, parent_cpu, fixed, sums
 
     walls, same, units, parent_cpu, fixed, sums = benchmark.pedantic(
         measure, rounds=1, iterations=1)
-    n = len(units)
-    excess, costs = warmups(units)
-    warm = sum(excess.values())
+    n = len(units["warm"])
     med = {k: float(np.median(v)) for k, v in walls.items()}
-    t1 = walls["pool1"][0]  # the run the unit costs come from
-    parent = parent_cpu / n  # start-up included: an upper bound of the per-unit share
-    per_unit = max(0.0, (t1 - fixed - warm - sum(costs)) / n)
-    inflation = (float(np.median(sums["pool2"])) / float(np.median(sums["pool1"]))
-                 if "pool2" in sums else 1.0)
     info = {"n_problems": N_PROBLEMS, "cores": cores, "rounds": ROUNDS, "walls": walls,
-            "wall_median": med, "same_results": same, "unit_cost_sum": sum(costs),
-            "unit_cost_median": float(np.median(costs)), "unit_cost_max": max(costs),
-            "warmup_per_topology": excess, "fixed": fixed, "per_unit": per_unit,
-            "parent_cpu_per_unit": parent, "cpu_inflation_at_2": inflation}
+            "wall_median": med, "same_results": same, "fixed": fixed}
+    # the model, fed with the first one-worker runs: warm for the steady state, cold for
+    # the compile of each topology (its first unit's excess over the warm run's)
+    excess, costs = warmups(units["warm"])
+    cold_excess, _ = warmups(units["cold"])
+    compile_ = {t: max(0.0, cold_excess[t] - excess.get(t, 0.0)) for t in cold_excess}
+    t1 = walls["pool1_warm"][0]  # the run the unit costs come from
+    parent = parent_cpu["warm"] / n  # start-up included: an upper bound
+    per_unit = max(0.0, (t1 - fixed - sum(excess.values()) - sum(costs)) / n)
+    inflation = {st: float(np.median(sums[f"pool2_{st}"])) / float(np.median(sums[f"pool1_{st}"]))
+                 for st in ("cold", "warm") if f"pool2_{st}" in sums}
+    info.update({"unit_cost_sum": sum(costs), "unit_cost_median": float(np.median(costs)),
+                 "unit_cost_max": max(costs), "warmup_per_topology": excess,
+                 "compile_per_topology": compile_, "per_unit": per_unit,
+                 "parent_cpu_per_unit": parent, "cpu_inflation_at_2": inflation})
     for key, ws in walls.items():
-        P = int(key[4:])
-        ratios = [w1 / w for w1, w in zip(walls["pool1"], ws)]  # round by round
+        P, state = int(key.split("_")[0][4:]), key.split("_")[1]
+        ratios = [w1 / w for w1, w in zip(walls[f"pool1_{state}"], ws)]  # round by round
         info[f"speedup_{key}"] = float(np.median(ratios))
         info[f"efficiency_{key}"] = float(np.median(ratios)) / P
-    model = dict(costs=costs, fixed=fixed, per_unit=per_unit, warm=warm, parent=parent)
-    if "pool2" in walls:
-        pr = predict(**model, workers=2, n=n, inflation=inflation)
-        info["predicted_wall_pool2"] = pr["tp"]
-        info["predicted_speedup_pool2"] = pr["t1"] / pr["tp"]
-    for P in (16, 64):
-        info[f"predicted_efficiency_192_at_{P}"] = predict(**model, workers=P,
-                                                           n=192)["efficiency"]
-        info[f"predicted_efficiency_192_at_{P}_inflated"] = predict(
-            **model, workers=P, n=192, inflation=inflation)["efficiency"]
+    model = dict(units=units["warm"], costs=costs, fixed=fixed, per_unit=per_unit,
+                 warm=excess, parent=parent)
+    for state, comp in (("warm", None), ("cold", compile_)):
+        if f"pool2_{state}" in walls:
+            pr = predict(**model, workers=2, n=n, compile_=comp,
+                         inflation=inflation.get(state, 1.0))
+            info[f"predicted_speedup_pool2_{state}"] = pr["t1"] / pr["tp"]
+        for P in (16, 64):
+            info[f"predicted_efficiency_192_at_{P}_{state}"] = predict(
+                **model, workers=P, n=192, compile_=comp)["efficiency"]
+            info[f"predicted_efficiency_192_at_{P}_{state}_inflated"] = predict(
+                **model, workers=P, n=192, compile_=comp,
+                inflation=inflation.get(state, 1.0))["efficiency"]
     benchmark.extra_info.update(info)
     print(json.dumps(info, indent=1))
     assert all(same.values()), same

@@ -28,14 +28,15 @@ others, the record names the requested tag and key, and the library's bytes matc
 digest; anything else (a truncated, garbled, foreign or copied library) is rebuilt, never
 loaded. (On platforms without user ids, such as Windows, only the record is checked.)
 
-Processes sharing a cache build each library once: the builder holds ``<name>.lock``
+Processes sharing a cache build each library once: its builder holds ``<name>.lock``
 (created exclusively) while its compiler runs; another process that needs the library
 meanwhile waits for it (:func:`library`) or keeps its interpreted Functions until it lands
 (:func:`start_library`) instead of compiling it a second time. A lock whose process is
-gone (same host) or older than :data:`LOCK_STALE` seconds is taken over. A background
-build is installed by a thread of its own when its compiler ends, whether or not its
-owner is still asking; a process that exits first stops its compilers and removes their
-files and locks.
+gone (same host) or older than :data:`LOCK_STALE` seconds is taken over. The builder is a
+small process of its own (the compiler, then the atomic install of library and record,
+then the removal of its build directory and lock), detached from the process that
+generated the C code: a library whose worker exits first still lands in the cache, and
+the next run loads it.
 
 Environment variables
 ---------------------
@@ -66,7 +67,6 @@ import tempfile
 import threading
 import time
 import warnings
-import weakref
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -343,20 +343,10 @@ def _rejection(lib: Path, tag: str, key: str) -> str | None:
     return None
 
 
-def _write_record(lib: Path, built: Path, tag: str, key: str, tmp: Path) -> None:
-    """Record the digest of the freshly built library ``built`` for ``lib`` and move both
-    into place atomically (library first: a reader of the old record sees a mismatch)."""
-    data = built.read_bytes()
-    rec = {"tag": tag, "key": key, "file": lib.name, "size": len(data),
-           "sha256": hashlib.sha256(data).hexdigest(), "casadi": ca.__version__,
-           "code_version": CODE_VERSION}
-    rec_tmp = tmp / (lib.stem + ".json")
-    fd = os.open(rec_tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    with os.fdopen(fd, "w") as f:
-        json.dump(rec, f, indent=1)
-    os.chmod(built, 0o700)  # whatever the umask: the loader refuses group-writable files
-    os.replace(built, lib)  # atomic: a concurrent reader sees old or new
-    os.replace(rec_tmp, _record_path(lib))
+def _record_fields(lib: Path, tag: str, key: str) -> dict[str, Any]:
+    """The record of ``lib`` but its size and digest (the builder adds those)."""
+    return {"tag": tag, "key": key, "file": lib.name, "casadi": ca.__version__,
+            "code_version": CODE_VERSION}
 
 
 def _load(path: Path, tag: str, key: str,
@@ -388,17 +378,92 @@ def _library_path(d: Path, tag: str, key: str) -> Path:
     return d / f"optkin_{tag.split(':')[0]}_{key[:20]}{_EXT}"
 
 
-def _start_compiler(cc: str, tmp: str, path: Path, funcs: Sequence[ca.Function],
-                    **popen: Any) -> tuple[Path, subprocess.Popen]:
-    """Generate the C code of ``funcs`` into ``tmp`` (in this thread) and start the
-    compiler on it; returns the library it will write and the compiler's process."""
-    src = Path(tmp) / (path.stem + ".c")
-    cg = ca.CodeGenerator(src.name, {"with_header": False})
-    for f in funcs:
-        cg.add(f)
-    cg.generate(tmp + os.sep)
-    so = Path(tmp) / path.name
-    return so, subprocess.Popen([cc, *_FLAGS, str(src), "-o", str(so), "-lm"], **popen)
+#: The builder: a process of its own (``python -S``, no optkin import) that runs the compiler
+#: on C code already generated, installs the library and its record in the cache
+#: atomically (library first: a reader of the old record sees a mismatch), then removes
+#: the build directory and its lock. Detached from the process that started it (a session
+#: of its own), it finishes even when that process exits or is killed: the next run loads
+#: the library instead of compiling it again.
+_BUILDER = r"""
+import hashlib, json, os, shutil, subprocess, sys
+a = json.loads(sys.argv[1])
+me = "%d %s" % (os.getpid(), a["host"])
+tmp, lock = a["tmp"], a["lock"]
+try:  # the lock now names this process (the starter may exit first)
+    t = os.path.join(tmp, "lock")
+    with open(t, "w") as f:
+        f.write(me)
+    os.replace(t, lock)
+except OSError:
+    pass
+ok = False
+try:
+    with open(os.path.join(tmp, "compiler.log"), "wb") as log:
+        p = subprocess.Popen(a["cmd"], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                             stderr=log)
+        try:
+            rc = p.wait(timeout=a["timeout"])
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+            rc = -1
+    if rc == 0:
+        with open(a["so"], "rb") as f:
+            data = f.read()
+        rec = dict(a["record"], size=len(data), sha256=hashlib.sha256(data).hexdigest())
+        rt = os.path.join(tmp, "record.json")
+        fd = os.open(rt, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "w") as f:
+            json.dump(rec, f, indent=1)
+        os.chmod(a["so"], 0o700)  # whatever the umask: group-writable files are refused
+        os.replace(a["so"], a["lib"])
+        os.replace(rt, a["rec"])
+        ok = True
+    else:
+        with open(os.path.join(tmp, "compiler.log"), "rb") as f:
+            sys.stderr.write(f.read()[-2000:].decode(errors="replace"))
+finally:
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        with open(lock) as f:
+            mine = f.read() == me
+        if mine:
+            os.unlink(lock)
+    except OSError:
+        pass
+sys.exit(0 if ok else 1)
+"""
+#: Seconds the compiler may run.
+COMPILE_LIMIT = 600.0
+_BUILDERS: list[subprocess.Popen] = []  # kept referenced until they end (no warnings)
+
+
+def _start_builder(cc: str, d: Path, path: Path, tag: str, key: str,
+                   funcs: Sequence[ca.Function], wait: bool = False) -> subprocess.Popen:
+    """Generate the C code of ``funcs`` (in this thread) into a fresh build directory of
+    ``d`` and start the builder on it (the lock of ``path`` must be this process's)."""
+    tmp = tempfile.mkdtemp(dir=d, prefix=".build-")
+    try:
+        src = Path(tmp) / (path.stem + ".c")
+        cg = ca.CodeGenerator(src.name, {"with_header": False})
+        for f in funcs:
+            cg.add(f)
+        cg.generate(tmp + os.sep)
+        so = Path(tmp) / path.name
+        args = {"host": _HOST, "tmp": tmp, "lock": str(_lock_path(path)),
+                "cmd": [cc, *_FLAGS, str(src), "-o", str(so), "-lm"], "so": str(so),
+                "lib": str(path), "rec": str(_record_path(path)),
+                "record": _record_fields(path, tag, key), "timeout": COMPILE_LIMIT}
+        proc = subprocess.Popen(
+            [sys.executable, "-S", "-c", _BUILDER, json.dumps(args)],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE if wait else subprocess.DEVNULL,
+            start_new_session=True, close_fds=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    _BUILDERS[:] = [b for b in _BUILDERS if b.poll() is None] + [proc]
+    return proc
 
 
 def library(
@@ -508,7 +573,7 @@ def libraries(
     requests: Sequence[tuple[str, Sequence[ca.Function]]], build: bool = True
 ) -> list[dict[str, ca.Function] | None]:
     """:func:`library` for several libraries; the missing ones are compiled in parallel
-    (one compiler process each; the C code is generated in this thread). A cached library
+    (one builder process each; the C code is generated in this thread). A cached library
     whose record does not vouch for it is rebuilt like a missing one; one that another
     process is building is waited for."""
     out: list[dict[str, ca.Function] | None] = [None] * len(requests)
@@ -531,7 +596,7 @@ def libraries(
     if cc is None:
         log.debug("optkin: no C compiler found; using interpreted Functions")
         return out
-    with _BUILD_LOCK, tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:
+    with _BUILD_LOCK:
         procs, others = [], []
         for k, tag, key, path, funcs in todo:
             out[k] = _load(path, tag, key, funcs)  # built meanwhile by another thread?
@@ -541,123 +606,80 @@ def libraries(
                 others.append((k, tag, key, path, funcs))
                 continue
             try:
-                so, p = _start_compiler(cc, tmp, path, funcs, stdout=subprocess.PIPE,
-                                        stderr=subprocess.PIPE, text=True)
-                procs.append((k, tag, key, path, funcs, so, p))
+                procs.append((k, tag, key, path, funcs,
+                              _start_builder(cc, d, path, tag, key, funcs, wait=True)))
             except (OSError, RuntimeError) as exc:
                 _release(path)
                 log.debug("optkin: generating %s failed (%s)", path.stem, exc)
-        for k, tag, key, path, funcs, so, p in procs:
+        for k, tag, key, path, funcs, p in procs:
             try:
-                try:
-                    _, err = p.communicate(timeout=600)
-                except subprocess.SubprocessError as exc:
-                    p.kill()
-                    p.wait()
-                    log.debug("optkin: compiling %s failed (%s)", path.name, exc)
-                    continue
-                if p.returncode != 0:
-                    log.debug("optkin: compiler failed: %s", err[-2000:])
-                    continue
-                try:
-                    _write_record(path, so, tag, key, Path(tmp))
-                except OSError as exc:
-                    log.debug("optkin: cannot store %s (%s)", path, exc)
-                    continue
-            finally:
-                _release(path)
+                _, err = p.communicate(timeout=COMPILE_LIMIT + 60)
+            except subprocess.SubprocessError as exc:
+                _kill_builder(p, path)
+                log.debug("optkin: compiling %s failed (%s)", path.name, exc)
+                continue
+            if p.returncode != 0:
+                log.debug("optkin: compiler failed: %s", err.decode(errors="replace"))
+                continue
             out[k] = _load(path, tag, key, funcs)
     for k, tag, key, path, funcs in others:
-        out[k] = _await_other(path, tag, key, funcs, 600.0)
+        out[k] = _await_other(path, tag, key, funcs, COMPILE_LIMIT + 60)
         if out[k] is None:  # its build failed or was abandoned: ours, once
             out[k] = libraries([(tag, funcs)], build)[0] if _holder_gone(
                 _lock_path(path)) else None
     return out
 
 
-_BUILDS: weakref.WeakSet = weakref.WeakSet()  # background builds of this process
+def _kill_builder(proc: subprocess.Popen, path: Path) -> None:
+    """Stop a builder and its compiler (its session); remove what it leaves."""
+    import signal
 
-
-@atexit.register
-def _stop_builds() -> None:  # a build nobody will use: stop it, leave nothing behind
-    for b in list(_BUILDS):
-        b.stop()
-
-
-class _Build:
-    """This process's background compiler for one library; a thread of its own installs
-    the library in the cache when the compiler ends (no CasADi call there: loading is for
-    the owner's thread), removes the build directory and releases the lock."""
-
-    def __init__(self, pending: PendingLibrary, tmp: str, so: Path,
-                 proc: subprocess.Popen) -> None:
-        self.tmp, self.so, self.proc = tmp, so, proc
-        self.installed = False
-        self.done = threading.Event()
-        _BUILDS.add(self)
-        threading.Thread(target=self._install, args=(pending.tag, pending.key, pending.path),
-                         name="optkin-install", daemon=True).start()
-
-    def _install(self, tag: str, key: str, path: Path) -> None:
-        try:
-            self.proc.wait()
-            if self.proc.returncode != 0:
-                try:
-                    err = (Path(self.tmp) / "compiler.log").read_bytes()[-2000:]
-                except OSError:
-                    err = b""
-                log.debug("optkin: compiler failed: %s", err.decode(errors="replace"))
-            else:
-                _write_record(path, self.so, tag, key, Path(self.tmp))
-                self.installed = True
-        except OSError as exc:
-            log.debug("optkin: cannot store %s (%s)", path, exc)
-        finally:
-            shutil.rmtree(self.tmp, ignore_errors=True)
-            _release(path)
-            self.done.set()
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            try:
-                self.proc.kill()
-            except OSError:
-                pass
-        self.done.wait(5.0)
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except OSError:
+        pass
+    proc.wait()
+    try:  # the lock names the builder (or still this process)
+        pid = _read_private(_lock_path(path), 256).decode(errors="replace").partition(" ")[0]
+        if pid in (str(proc.pid), str(os.getpid())):
+            os.unlink(_lock_path(path))
+    except (OSError, ValueError):
+        pass
+    for b in path.parent.glob(".build-*"):  # its directory holds path's C file
+        if (b / (path.stem + ".c")).exists():
+            shutil.rmtree(b, ignore_errors=True)
 
 
 class PendingLibrary:
-    """A library being compiled in the background (:func:`start_library`), by this
-    process or by another one sharing the cache.
+    """A library being compiled in the background (:func:`start_library`), by a builder
+    this process started or by another process sharing the cache.
 
-    This process's build: the C code was generated in the calling thread; only the
-    compiler runs meanwhile, as a separate process, and the library is installed in the
-    cache when it ends, whether or not anyone asks (it is stopped only when the process
-    exits). Another process's build: :meth:`poll` looks for its library (a file-system
-    check, at most every 20 ms) and takes the build over if that process gave up.
-    :meth:`poll` returns None while the build runs, then (once) the loaded Functions, or
-    ``False`` when the build failed; afterwards it keeps returning that outcome.
+    The C code was generated in the calling thread; the builder (a detached process)
+    compiles it and installs the library in the cache, whether or not anyone asks, and
+    even after this process exits. :meth:`poll` returns None while the build runs, then
+    (once) the loaded Functions, or ``False`` when the build failed; afterwards it keeps
+    returning that outcome. A build of another process that gave up is taken over.
     """
 
-    def __init__(self, tag: str, key: str, path: Path, funcs: Sequence[ca.Function]) -> None:
+    def __init__(self, tag: str, key: str, path: Path, funcs: Sequence[ca.Function],
+                 proc: subprocess.Popen | None = None) -> None:
         self.tag, self.key, self.path, self.funcs = tag, key, path, list(funcs)
-        self._build: _Build | None = None
+        self._proc = proc
         self._out: dict[str, ca.Function] | bool | None = None
         self._next_look = 0.0
 
     @property
     def own(self) -> bool:
-        """Whether this process runs the compiler (else another process does)."""
-        return self._build is not None
+        """Whether this process started the builder (else another process did)."""
+        return self._proc is not None
 
     def poll(self) -> dict[str, ca.Function] | bool | None:
         if self._out is not None:
             return self._out
-        if self._build is not None:
-            if not self._build.done.is_set():
+        if self._proc is not None:
+            if self._proc.poll() is None:
                 return None
-            self._out = (self._build.installed and _load(self.path, self.tag, self.key,
-                                                         self.funcs)) or False
+            self._out = _load(self.path, self.tag, self.key, self.funcs) or False
             return self._out
         now = time.monotonic()
         if now < self._next_look:
@@ -673,12 +695,12 @@ class PendingLibrary:
                 self._out = nxt
             elif nxt is None:
                 self._out = False
-            elif nxt._build is not None:
-                self._build, nxt._build = nxt._build, None
+            elif nxt._proc is not None:
+                self._proc, nxt._proc = nxt._proc, None
         return self._out
 
-    def wait(self, timeout: float = 600.0) -> dict[str, ca.Function] | bool:
-        """The outcome, waiting at most ``timeout`` s (then this process's compiler is
+    def wait(self, timeout: float = COMPILE_LIMIT + 60) -> dict[str, ca.Function] | bool:
+        """The outcome, waiting at most ``timeout`` s (then this process's builder is
         stopped and the outcome is ``False``)."""
         end = time.monotonic() + timeout
         while True:
@@ -687,13 +709,15 @@ class PendingLibrary:
                 return out
             left = end - time.monotonic()
             if left <= 0:
-                if self._build is not None:
-                    self._build.stop()
-                    return self.poll() or False
+                if self._proc is not None:
+                    _kill_builder(self._proc, self.path)
                 self._out = False
                 return False
-            if self._build is not None:
-                self._build.done.wait(min(left, 1.0))
+            if self._proc is not None:
+                try:
+                    self._proc.wait(timeout=min(left, 1.0))
+                except subprocess.TimeoutExpired:
+                    pass
             else:
                 time.sleep(min(left, 0.02))
 
@@ -701,7 +725,7 @@ class PendingLibrary:
 def start_library(tag: str, funcs: Sequence[ca.Function]
                   ) -> dict[str, ca.Function] | PendingLibrary | None:
     """:func:`library` without waiting for the compiler: the cached library when there is
-    one, else a :class:`PendingLibrary` whose compiler runs in the background (or that
+    one, else a :class:`PendingLibrary` whose builder runs in the background (or that
     waits for another process building the same library), else None (compiling off, no
     cache directory, no compiler, or the C code could not be generated). The caller keeps
     using the interpreted Functions until :meth:`PendingLibrary.poll` gives the compiled
@@ -721,19 +745,13 @@ def start_library(tag: str, funcs: Sequence[ca.Function]
         return None
     if not _claim(path):
         return PendingLibrary(tag, key, path, funcs)
-    tmp = tempfile.mkdtemp(dir=d, prefix=".build-")
     try:
-        with open(Path(tmp) / "compiler.log", "wb") as log_file:  # no pipe to fill up
-            so, proc = _start_compiler(cc, tmp, path, funcs, stdout=subprocess.DEVNULL,
-                                       stderr=log_file)
+        proc = _start_builder(cc, d, path, tag, key, funcs)
     except (OSError, RuntimeError) as exc:
         log.debug("optkin: generating %s failed (%s)", path.stem, exc)
-        shutil.rmtree(tmp, ignore_errors=True)
         _release(path)
         return None
-    out = PendingLibrary(tag, key, path, funcs)
-    out._build = _Build(out, tmp, so, proc)
-    return out
+    return PendingLibrary(tag, key, path, funcs, proc)
 
 
 class FastFn:

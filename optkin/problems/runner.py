@@ -801,22 +801,26 @@ def _units(todo: list[tuple[ProblemFileInfo, bytes]], pictures: bool, split: boo
     """The units of work, longest first (LPT): a problem is split into one unit per task
     when several workers share the work (a unit costs little more than its task: the
     worker keeps the problem's model), else one unit per problem. Ties keep file order."""
-    from optkin.problems.costs import PROBLEM_COST, task_costs
+    from optkin.problems.costs import PROBLEM_COST, task_costs, topology_group
 
     units: list[tuple[float, int, Job]] = []
     for n, (info, data) in enumerate(todo):
         spec = {"display": info.display, "data": data, "source": str(info.path),
                 "pictures": pictures}
         try:
-            costs = task_costs(parse_toml(data, info.display))
+            doc = parse_toml(data, info.display)
+            costs, group = task_costs(doc), topology_group(doc)
         except Exception:  # noqa: BLE001 - the worker reports what is wrong with the file
-            costs = [1.0]
+            costs, group = [1.0], "?"
         if split and len(costs) > 1:
             for i, c in enumerate(costs):
                 units.append((PROBLEM_COST + c, n,
-                              Job(f"{info.display}#{i}", dict(spec, only=[i]))))
+                              Job(f"{info.display}#{i}", dict(spec, only=[i]),
+                                  cost=PROBLEM_COST + c, group=group)))
         else:
-            units.append((PROBLEM_COST + sum(costs), n, Job(info.display, spec)))
+            units.append((PROBLEM_COST + sum(costs), n,
+                          Job(info.display, spec, cost=PROBLEM_COST + sum(costs),
+                              group=group)))
     units.sort(key=lambda u: (-u[0], u[1]))
     return [u[2] for u in units]
 

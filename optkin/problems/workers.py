@@ -31,7 +31,6 @@ import threading
 import time
 import traceback
 import weakref
-from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -110,6 +109,25 @@ def _die_with_parent(parent: int) -> None:
         os._exit(1)
 
 
+#: What every problem's first task imports (CasADi alone about 0.4 s), imported before a
+#: worker says it is ready: workers start while the command line is still reading the
+#: problem files, so this overlaps it, instead of being paid by each worker's first unit.
+#: Nothing heavy that only some tasks use (cvxpy, matplotlib, scipy.special/spatial).
+_PRELOAD = ("casadi", "numpy.random", "optkin.model.core", "optkin.solvers.enumerate",
+            "optkin.solvers.homotopy", "optkin.analysis.continuation",
+            "optkin.analysis.aspects", "optkin.problems.tasks")
+
+
+def _preload() -> None:
+    import importlib
+
+    for name in _PRELOAD:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 - the task that needs it will report it
+            pass
+
+
 def serve(rfd: int, wfd: int, parent: int) -> None:
     """Worker main loop: read jobs from ``rfd``, report on ``wfd`` until told to exit."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
@@ -117,6 +135,7 @@ def serve(rfd: int, wfd: int, parent: int) -> None:
     import optkin
     from optkin.problems import runner
 
+    _preload()
     _send(wfd, ("ready", {"pid": os.getpid(),
                           "optkin": str(Path(optkin.__file__).resolve().parent),
                           "version": getattr(optkin, "__version__", "")}))
@@ -164,6 +183,9 @@ class Job:
     key: str
     spec: dict[str, Any]
     tasks: dict[int, dict[str, Any]] = field(default_factory=dict)
+    #: the estimated cost and the topology group, for scheduling (:mod:`.costs`)
+    cost: float = 1.0
+    group: str = ""
     pictures: dict[str, bytes] = field(default_factory=dict)
     setup_deaths: int = 0
 
@@ -177,6 +199,34 @@ class JobOutcome:
     result: dict[str, Any] | None = None
     pictures: dict[str, bytes] = field(default_factory=dict)
     message: str = ""
+
+
+class _Pending:
+    """The jobs not yet running, handed out by :class:`optkin.problems.costs.Affinity`."""
+
+    def __init__(self, jobs: Iterable[Job]) -> None:
+        from optkin.problems.costs import Affinity
+
+        self.jobs = list(jobs)
+        self.policy = Affinity([(j.cost, j.group) for j in self.jobs])
+        self.index = {id(j): i for i, j in enumerate(self.jobs)}
+
+    def __len__(self) -> int:
+        return len(self.policy)
+
+    def take(self, worker: object) -> Job:
+        return self.jobs[self.policy.take(worker)]
+
+    def popleft(self) -> Job:
+        for ix in self.policy.left.values():
+            if ix:
+                i = ix.pop(0)
+                self.policy.work[self.jobs[i].group] -= self.jobs[i].cost
+                return self.jobs[i]
+        raise IndexError("no pending job")
+
+    def appendleft(self, job: Job) -> None:
+        self.policy.put_back(self.index[id(job)])
 
 
 class _Worker:
@@ -448,7 +498,7 @@ def run_jobs(
     ``on_outcome`` is called as each job ends (in the calling thread). Afterwards up to
     ``keep`` (default ``n_workers``) workers stay idle for the next call in this process.
     """
-    pending: deque[Job] = deque(jobs)
+    pending = _Pending(jobs)
     outcomes: list[JobOutcome] = []
     if not pending:
         return outcomes
@@ -465,7 +515,7 @@ def run_jobs(
     def assign(w: _Worker) -> None:
         if not pending or not w.ready:
             return
-        job = pending.popleft()
+        job = pending.take(w)
         spec = dict(job.spec, done_tasks=job.tasks, time_limit=time_limit)
         w.job, w.task, w.acked = job, None, False
         w.limit = time_limit
@@ -480,6 +530,7 @@ def run_jobs(
     def abandon(w: _Worker, why: str) -> None:
         """The worker is gone: record its task (if any) and requeue the rest."""
         w.dead = True
+        pending.policy.leave(w)
         if not w.ready:  # it never started: after two such deaths, stop trying
             start_failures.append(why)
             if len(start_failures) >= 2:
