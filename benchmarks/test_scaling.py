@@ -23,9 +23,9 @@ same state (the in-run baseline), the efficiencies, whether the results equal th
 the first run, and the predictions of :func:`predict`, a model fed with what the runs
 measured:
 
-* the unit costs: each problem's ``elapsed`` in the warm ``--jobs 1`` run (the worker's
-  time to fetch the model and run the tasks, from the result files), with the runner's
-  estimated cost and topology group of each;
+* the unit costs: each problem's ``elapsed`` in the warm ``--jobs 1`` runs (the worker's
+  time to fetch the model and run the tasks, from the result files; the median over the
+  rounds), with the runner's estimated cost and topology group of each;
 * the set-up of a topology in a worker: the first unit's cost over the median of the
   others, in the order the runner ran them (warm run); a worker pays it for every
   topology it meets;
@@ -34,10 +34,10 @@ measured:
   before its code lands (an upper bound: those workers run the interpreted code
   meanwhile);
 * the fixed cost: the wall time of a run of one trivial problem (a four-bar's forward
-  model) less that problem's own time: start-up of the command line and of a worker, the
+  model) less that problem's own time (median of three runs): start-up of the command line and of a worker, the
   summary; paid once whatever the number of workers;
 * the overhead per unit outside the worker (messages, the parent writing the result): the
-  rest of the warm ``--jobs 1`` run's wall time, shared among its units;
+  rest of the warm ``--jobs 1`` runs' median wall time, shared among its units;
 * the parent's CPU time per unit (``time.process_time`` of the command-line process over
   that run, which excludes the workers): the parent handles the results one after the
   other, so no schedule beats ``n`` times it;
@@ -325,8 +325,8 @@ def test_scaling(benchmark, tmp_path):
         walls: dict[str, list[float]] = {}
         same: dict[str, bool] = {}
         ref = None
-        units: dict[str, list] = {}
-        parent_cpu: dict[str, float] = {}
+        units: dict[str, list] = {}  # per state, the one-worker runs' units
+        parent_cpu: dict[str, list[float]] = {}
         sums: dict[str, list[float]] = {}
         for r in range(ROUNDS):  # interleaved, so that a slow spell of the machine hits all
             for state in ("cold", "warm"):
@@ -338,8 +338,9 @@ def test_scaling(benchmark, tmp_path):
                     walls.setdefault(key, []).append(wall)
                     u = unit_costs(out, batch)
                     sums.setdefault(key, []).append(sum(c for _, _, c, _ in u))
-                    if P == 1 and state not in units:
-                        units[state], parent_cpu[state] = u, cpu
+                    if P == 1:
+                        units.setdefault(state, []).append(u)
+                        parent_cpu.setdefault(state, []).append(cpu)
                     if ref is None:
                         ref = results_of(out)
                     same[key] = same.get(key, True) and results_of(out) == ref
@@ -355,13 +356,18 @@ def test_scaling(benchmark, tmp_path):
         # the fixed cost: a run of one trivial problem, less that problem's own time
         triv = tmp_path / "triv"
         make_trivial(triv, 1)
-        t_one, _ = run_batch(triv, tmp_path / "triv_out", filled)
-        fixed = max(0.0, t_one - sum(c for _, _, c, _ in
-                                     unit_costs(tmp_path / "triv_out", triv)))
-        return walls, same, units, parent_cpu, fixed, sums
+        fixed = []
+        for k in range(3):
+            t_one, _ = run_batch(triv, tmp_path / f"triv_out{k}", filled)
+            fixed.append(max(0.0, t_one - sum(c for _, _, c, _ in
+                                              unit_costs(tmp_path / f"triv_out{k}", triv))))
+        return walls, same, units, parent_cpu, float(np.median(fixed)), sums
 
     walls, same, units, parent_cpu, fixed, sums = benchmark.pedantic(
         measure, rounds=1, iterations=1)
+    # each unit's median over the rounds (the order is the same in every run)
+    units = {st: [(*rows[0][i][:2], float(np.median([r[i][2] for r in rows])), rows[0][i][3])
+                  for i in range(len(rows[0]))] for st, rows in units.items()}
     n = len(units["warm"])
     med = {k: float(np.median(v)) for k, v in walls.items()}
     info = {"n_problems": N_PROBLEMS, "cores": cores, "rounds": ROUNDS, "walls": walls,
@@ -371,8 +377,8 @@ def test_scaling(benchmark, tmp_path):
     excess, costs = warmups(units["warm"])
     cold_excess, _ = warmups(units["cold"])
     compile_ = {t: max(0.0, cold_excess[t] - excess.get(t, 0.0)) for t in cold_excess}
-    t1 = walls["pool1_warm"][0]  # the run the unit costs come from
-    parent = parent_cpu["warm"] / n  # start-up included: an upper bound
+    t1 = med["pool1_warm"]  # the runs the unit costs come from
+    parent = float(np.median(parent_cpu["warm"])) / n  # start-up included: an upper bound
     per_unit = max(0.0, (t1 - fixed - sum(excess.values()) - sum(costs)) / n)
     inflation = {st: float(np.median(sums[f"pool2_{st}"])) / float(np.median(sums[f"pool1_{st}"]))
                  for st in ("cold", "warm") if f"pool2_{st}" in sums}
