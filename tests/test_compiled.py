@@ -16,6 +16,7 @@ import subprocess
 import sys
 import textwrap
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -489,3 +490,32 @@ def test_a_background_build_lands_though_nobody_asks(tmp_path, monkeypatch):
     assert cc._load(path, "land:test", key, [f]) is not None
     time.sleep(0.2)
     assert sorted(p.suffix for p in tmp_path.iterdir()) == [".json", ".so"]
+
+
+# ------------------------------------------------------------ graphs kept in the cache
+def test_memo_function_reads_back_only_what_it_wrote(tmp_path, monkeypatch):
+    """A stored graph is read back instead of rebuilt, evaluates as the built one; a
+    changed payload, or a file others can write, is rebuilt, never read."""
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+    x = ca.SX.sym("x", 3)
+    calls = []
+
+    def build():
+        calls.append(1)
+        return ca.Function("g", [x], [ca.sin(x) * ca.sumsqr(x)])
+
+    f1 = cc.memo_function("test", ["parts", b"more"], build)
+    (path,) = [p for p in tmp_path.iterdir() if p.name.startswith("optkin_fn_test_")]
+    f2 = cc.memo_function("test", ["parts", b"more"], build)
+    assert len(calls) == 1
+    v = np.array([0.3, -1.2, 2.5])
+    np.testing.assert_array_equal(np.array(f2(v)), np.array(f1(v)))
+    cc.memo_function("test", ["other parts"], build)  # other parts: another graph
+    assert len(calls) == 2
+    data = path.read_bytes()
+    path.write_bytes(data.replace(b"sin", b"cos", 1) if b"sin" in data else data[:-10])
+    cc.memo_function("test", ["parts", b"more"], build)
+    assert len(calls) == 3  # the digest no longer matched
+    path.chmod(0o666)
+    cc.memo_function("test", ["parts", b"more"], build)
+    assert len(calls) == 4  # not private: not read

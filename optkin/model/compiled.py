@@ -54,6 +54,7 @@ Environment variables
 from __future__ import annotations
 
 import atexit
+import contextlib
 import hashlib
 import json
 import logging
@@ -82,6 +83,7 @@ __all__ = [
     "find_compiler",
     "library",
     "start_library",
+    "memo_function",
     "PendingLibrary",
 ]
 
@@ -489,6 +491,47 @@ def library(
         interpreted Functions).
     """
     return libraries([(tag, funcs)], build)[0]
+
+
+def memo_function(tag: str, parts: Sequence[str | bytes],
+                  build: Any) -> ca.Function:
+    """``build()``, once per cache directory: a Function whose graph is costly to build in
+    Python (op by op) is stored serialized in the cache under a digest of ``parts`` (all
+    that determines it: the serialized inputs, the options, the building code's source
+    digest), the CasADi version and :data:`CODE_VERSION`; later processes read it back in
+    a few milliseconds. The file is trusted as a library is (a private regular file) and
+    holds the SHA-256 of its payload; anything else is rebuilt."""
+    d = cache_dir()
+    if d is None:
+        return build()
+    h = hashlib.sha256(f"{tag}|casadi {ca.__version__}|code {CODE_VERSION}".encode())
+    for part in parts:
+        h.update(part if isinstance(part, bytes) else part.encode())
+        h.update(b"\0")
+    path = d / f"optkin_fn_{tag}_{h.hexdigest()[:24]}.casadi"
+    try:
+        digest, _, payload = _read_private(path).partition(b"\n")
+        if hashlib.sha256(payload).hexdigest().encode() == digest:
+            return ca.Function.deserialize(payload.decode())
+    except FileNotFoundError:
+        pass
+    except (OSError, ValueError, RuntimeError) as exc:
+        log.debug("optkin: not reading %s (%s); rebuilding it", path.name, exc)
+    f = build()
+    try:
+        payload = f.serialize().encode()
+        fd, tmp = tempfile.mkstemp(dir=d, prefix=".fn-")
+        try:
+            with os.fdopen(fd, "wb") as out:
+                out.write(hashlib.sha256(payload).hexdigest().encode() + b"\n" + payload)
+            os.replace(tmp, path)  # atomic: a concurrent reader sees none or all of it
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
+    except (OSError, RuntimeError) as exc:
+        log.debug("optkin: cannot store %s (%s)", path.name, exc)
+    return f
 
 
 def _lock_path(lib: Path) -> Path:

@@ -55,6 +55,8 @@ compiled-code cache directory (``.npz``, no pickles); both are re-verified on lo
 from __future__ import annotations
 
 import contextlib
+import functools
+import hashlib
 import time
 import weakref
 from dataclasses import dataclass
@@ -265,6 +267,12 @@ def _finite(v):
     return ca.sum1(ca.fabs(v)) < 1e300  # NaN and inf both fail
 
 
+@functools.lru_cache(maxsize=1)
+def _source_digest() -> str:
+    """A digest of this module's source: a stored tracker graph is one this code built."""
+    return hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
+
+
 class _Tracker:
     """:func:`track`'s step, written once as a CasADi graph: ``CHUNK`` steps of every path
     in one compiled call, mapped over the paths (the same arithmetic as :func:`track`, whose
@@ -291,160 +299,168 @@ class _Tracker:
         sym = ca.SX if sx else ca.MX
         self.n, self.nth, self.h0, self.hmax = n, nth, h0, hmax
         self.sys = sys
-        # the value and Jacobian (the corrector), the Jacobian and the parameter derivative
-        # (the predictor): each without the work of the output it does not need
-        ins = sys.f_sx.sx_in()
-        out = sys.f_sx(*ins)
-        f_hj = ca.Function("homotopy_hj", ins[:4], out[:4])
-        f_jt = ca.Function("homotopy_jt", ins, out[2:])
         self.width = 2 * n + 4 + (6 * n + 2 if predictor == "hermite" else 0)
         self.predictor = predictor
-        s = sym.sym("state", self.width)
-        # the parameters of a run: start theta, direction, gamma and the scale of the
-        # unknowns (the target model's: an input, so that the compiled tracker is one per
-        # topology whatever geometry was seen first)
-        par = sym.sym("par", 4 * nth + 2 + n)
-        th0 = (par[0:nth], par[nth:2 * nth])
-        d = (par[2 * nth:3 * nth], par[3 * nth:4 * nth])
-        g = (par[4 * nth], par[4 * nth + 1])
-        sc = par[4 * nth + 2:]
-
-        def theta(t):
-            den = (1 + (g[0] - 1) * t, g[1] * t)
-            sr, si = _cdiv((g[0] * t, g[1] * t), den)
-            dsr, dsi = _cdiv(g, _cmul(den, den))
-            TH = (th0[0] + sr * d[0] - si * d[1], th0[1] + sr * d[1] + si * d[0])
-            DTH = (dsr * d[0] - dsi * d[1], dsr * d[1] + dsi * d[0])
-            return TH, DTH
-
-        def csolve(Jr, Ji, br, bi, x):  # equilibrated as in _solve_scaled
-            if n <= 3 and sx:  # the complex adjugate: a 6 x 6 real QR costs 5x more
-                return _adjugate_solve(Jr, Ji, br, bi)
-            if n <= SMALL:
-                A = ca.blockcat([[Jr, -Ji], [Ji, Jr]])
-                # MX: QR named, so that the interpreted chunk (used while the compiler
-                # runs) solves as the compiled one does
-                u = (ca.solve(A, ca.vertcat(br, bi)) if sx else
-                     ca.solve(A, ca.vertcat(br, bi), "qr"))
-                return u[:n], u[n:]
-            D = ca.fmax(1, absc(x) / sc)
-            Jr, Ji = Jr * ca.repmat(D.T, n, 1), Ji * ca.repmat(D.T, n, 1)
-            r = 1 / ca.sqrt(ca.sum2(Jr ** 2 + Ji ** 2))
-            Jr, Ji = Jr * ca.repmat(r, 1, n), Ji * ca.repmat(r, 1, n)
-            A = ca.blockcat([[Jr, -Ji], [Ji, Jr]])
-            b = ca.vertcat(br * r, bi * r)
-            u = ca.solve(A, b) if sx else ca.solve(A, b, "qr")
-            return u[:n] * D, u[n:] * D
-
-        def rhs(x, t):
-            TH, DTH = theta(t)
-            Jr, Ji, Tr, Ti = f_jt(x[0], x[1], TH[0], TH[1], DTH[0], DTH[1])
-            kr, ki = csolve(Jr, Ji, Tr, Ti, x)
-            return -kr, -ki
-
-        def absc(x):
-            return ca.sqrt(x[0] ** 2 + x[1] ** 2)
-
-        Xa = (s[0:n], s[n:2 * n])
-        t, h, st, cnt = s[2 * n + _T], s[2 * n + _H], s[2 * n + _ST], s[2 * n + _CNT]
-        run = st == 0
-        ha = ca.fmin(h, 1 - t)
-        hermite = predictor == "hermite"
-        if hermite:  # extra state: previous point, its t, both tangents, "has previous"
-            o = 2 * n + 4
-            xp = (s[o:o + n], s[o + n:o + 2 * n])
-            tp = s[o + 2 * n]
-            dx = (s[o + 2 * n + 1:o + 3 * n + 1], s[o + 3 * n + 1:o + 4 * n + 1])
-            dxp = (s[o + 4 * n + 1:o + 5 * n + 1], s[o + 5 * n + 1:o + 6 * n + 1])
-            hasp = s[o + 6 * n + 1]
-            D = t - tp
-            u = 1 + ha / ca.if_else(hasp > 0, D, 1.0)
-            h00, h10 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u
-            h01, h11 = -2 * u**3 + 3 * u**2, u**3 - u**2
-            herm = tuple(h00 * xp[i] + h10 * D * dxp[i] + h01 * Xa[i] + h11 * D * dx[i]
-                         for i in (0, 1))
-            Xp = tuple(ca.if_else(hasp > 0, herm[i], Xa[i] + ha * dx[i]) for i in (0, 1))
-        else:
-            k1 = rhs(Xa, t)
-            k2 = rhs((Xa[0] + 0.5 * ha * k1[0], Xa[1] + 0.5 * ha * k1[1]), t + 0.5 * ha)
-            k3 = rhs((Xa[0] + 0.5 * ha * k2[0], Xa[1] + 0.5 * ha * k2[1]), t + 0.5 * ha)
-            k4 = rhs((Xa[0] + ha * k3[0], Xa[1] + ha * k3[1]), t + ha)
-            Xp = tuple(Xa[i] + ha / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
-                       for i in (0, 1))
-        tn = t + ha
-        THn, _ = theta(tn)
-        ok = _finite(ca.vertcat(*Xp))
-        Xp = tuple(ca.if_else(ok, Xp[i], Xa[i]) for i in (0, 1))
-        size = 1 + ca.mmax(absc(Xp) / sc)
-        prev = ca.inf
-        first = None
-        for _ in range(newton):
-            Hr, Hi, Jr, Ji = f_hj(Xp[0], Xp[1], THn[0], THn[1])
-            up = csolve(Jr, Ji, Hr, Hi, Xp)
-            fin = _finite(ca.vertcat(*up))
-            nrm = ca.if_else(fin, ca.mmax(absc(up) / sc) / size, ca.inf)
-            if first is None:
-                first = nrm
-            ok = ca.logic_and(ca.logic_and(ok, fin), ca.logic_or(
-                nrm <= ca.fmax(0.5 * prev, 1e-9), prev <= NOISE))
-            Xp = tuple(Xp[i] - ca.if_else(ok, up[i], 0) for i in (0, 1))
-            prev = nrm
-        small = ca.mmax(absc((Xa[0] - Xp[0], Xa[1] - Xp[1])) / sc)
-        accept = ca.logic_and(ca.logic_and(ok, prev <= accept_tol),
-                              small <= 0.5 + 0.5 * ca.mmax(absc(Xa)))
-        acc = ca.logic_and(run, accept)
-        X1 = tuple(ca.if_else(acc, Xp[i], Xa[i]) for i in (0, 1))
-        t1 = ca.if_else(acc, tn, t)
-        hgrow = ca.fmin(h * ca.if_else(first < 1e-7, 2.0, grow), hmax)
-        h1 = ca.if_else(run, ca.if_else(accept, hgrow, 0.5 * h), h)
-        far = ca.mmax(absc(X1) / sc) > big
-        code = ca.if_else(far, ca.if_else(t1 >= 0.99, 2, 3),
-                          ca.if_else(ca.logic_and(ca.logic_not(accept), h1 < hmin), 3,
-                                     ca.if_else(t1 >= 1.0, 1, 0)))
-        st1 = ca.if_else(run, code, st)
-        s1 = ca.vertcat(X1[0], X1[1], t1, h1, st1, cnt + run)
-        if hermite:  # on acceptance: the tangent at the new point; the old one moves back
-            kn = rhs(Xp, tn)
-            keep = lambda a, b: ca.if_else(acc, a, b)  # noqa: E731
-            s1 = ca.vertcat(s1, keep(Xa[0], xp[0]), keep(Xa[1], xp[1]), keep(t, tp),
-                            keep(kn[0], dx[0]), keep(kn[1], dx[1]),
-                            keep(dx[0], dxp[0]), keep(dx[1], dxp[1]),
-                            ca.if_else(acc, 1.0, hasp))
-        # common subexpressions merged (the angles' cos and sin recur): a 3-RPR's step
-        # runs twice as fast compiled
-        opts = {"cse": True} if sx else {}
-        step = ca.Function("homotopy_step", [s, par], [s1], opts)
-        # the polish, in the same call: three Newton steps at the target (s(1) = 1) on the
-        # paths that have arrived (again in later calls: a converged point stays), and the
-        # condition number of Jx there (columns scaled), written out for the adjugate's
-        # orders, else from one evaluation in numpy (:func:`_endpoint_cond`)
-        X = Xa
-        TH1 = (th0[0] + d[0], th0[1] + d[1])
-        done = st == 1
-        for _ in range(3):
-            Hr, Hi, Jr, Ji = f_hj(X[0], X[1], TH1[0], TH1[1])
-            up = csolve(Jr, Ji, Hr, Hi, X)
-            use = ca.logic_and(done, _finite(ca.vertcat(*up)))
-            X = tuple(X[i] - ca.if_else(use, up[i], 0) for i in (0, 1))
-        S = ca.vertcat(X[0], X[1], s[2 * n:])
         self.fused_cond = n <= 3 and sx
-        if self.fused_cond:
-            _, _, Jr, Ji = f_hj(X[0], X[1], TH1[0], TH1[1])
-            D = ca.repmat(sc.T, n, 1)
-            cond = ca.if_else(done, _adjugate_cond(Jr * D, Ji * D), ca.inf)
-        else:
-            cond = ca.inf
-        polish = ca.Function("homotopy_polish", [s, par], [S, cond], opts)
-        # CHUNK steps as a loop over the step (fold), then the polish: C code the size of
-        # one step (inlined, a 3-RPR's chunk took gcc 4-5 s; a loop, under a second)
-        ms, mp = ca.MX.sym("state", self.width), ca.MX.sym("par", par.shape[0])
-        # a path that has stopped is not stepped again (a branch in the compiled code):
-        # a call can hold many steps without paying them for the paths already done
-        live = ca.Function("homotopy_live_step", [ms, mp], [ca.if_else(
-            ms[2 * n + _ST] == 0, step(ms, mp), ms, True)])
-        last = live.fold(CHUNK)(ms, ca.repmat(mp, 1, CHUNK))
-        self.chunk = ca.Function("homotopy_chunk", [ms, mp], polish(last, mp))
         from ..model import compiled as cc
+
+        def build() -> ca.Function:
+            # the value and Jacobian (the corrector), the Jacobian and the parameter derivative
+            # (the predictor): each without the work of the output it does not need
+            ins = sys.f_sx.sx_in()
+            out = sys.f_sx(*ins)
+            f_hj = ca.Function("homotopy_hj", ins[:4], out[:4])
+            f_jt = ca.Function("homotopy_jt", ins, out[2:])
+            s = sym.sym("state", self.width)
+            # the parameters of a run: start theta, direction, gamma and the scale of the
+            # unknowns (the target model's: an input, so that the compiled tracker is one per
+            # topology whatever geometry was seen first)
+            par = sym.sym("par", 4 * nth + 2 + n)
+            th0 = (par[0:nth], par[nth:2 * nth])
+            d = (par[2 * nth:3 * nth], par[3 * nth:4 * nth])
+            g = (par[4 * nth], par[4 * nth + 1])
+            sc = par[4 * nth + 2:]
+
+            def theta(t):
+                den = (1 + (g[0] - 1) * t, g[1] * t)
+                sr, si = _cdiv((g[0] * t, g[1] * t), den)
+                dsr, dsi = _cdiv(g, _cmul(den, den))
+                TH = (th0[0] + sr * d[0] - si * d[1], th0[1] + sr * d[1] + si * d[0])
+                DTH = (dsr * d[0] - dsi * d[1], dsr * d[1] + dsi * d[0])
+                return TH, DTH
+
+            def csolve(Jr, Ji, br, bi, x):  # equilibrated as in _solve_scaled
+                if n <= 3 and sx:  # the complex adjugate: a 6 x 6 real QR costs 5x more
+                    return _adjugate_solve(Jr, Ji, br, bi)
+                if n <= SMALL:
+                    A = ca.blockcat([[Jr, -Ji], [Ji, Jr]])
+                    # MX: QR named, so that the interpreted chunk (used while the compiler
+                    # runs) solves as the compiled one does
+                    u = (ca.solve(A, ca.vertcat(br, bi)) if sx else
+                         ca.solve(A, ca.vertcat(br, bi), "qr"))
+                    return u[:n], u[n:]
+                D = ca.fmax(1, absc(x) / sc)
+                Jr, Ji = Jr * ca.repmat(D.T, n, 1), Ji * ca.repmat(D.T, n, 1)
+                r = 1 / ca.sqrt(ca.sum2(Jr ** 2 + Ji ** 2))
+                Jr, Ji = Jr * ca.repmat(r, 1, n), Ji * ca.repmat(r, 1, n)
+                A = ca.blockcat([[Jr, -Ji], [Ji, Jr]])
+                b = ca.vertcat(br * r, bi * r)
+                u = ca.solve(A, b) if sx else ca.solve(A, b, "qr")
+                return u[:n] * D, u[n:] * D
+
+            def rhs(x, t):
+                TH, DTH = theta(t)
+                Jr, Ji, Tr, Ti = f_jt(x[0], x[1], TH[0], TH[1], DTH[0], DTH[1])
+                kr, ki = csolve(Jr, Ji, Tr, Ti, x)
+                return -kr, -ki
+
+            def absc(x):
+                return ca.sqrt(x[0] ** 2 + x[1] ** 2)
+
+            Xa = (s[0:n], s[n:2 * n])
+            t, h, st, cnt = s[2 * n + _T], s[2 * n + _H], s[2 * n + _ST], s[2 * n + _CNT]
+            run = st == 0
+            ha = ca.fmin(h, 1 - t)
+            hermite = predictor == "hermite"
+            if hermite:  # extra state: previous point, its t, both tangents, "has previous"
+                o = 2 * n + 4
+                xp = (s[o:o + n], s[o + n:o + 2 * n])
+                tp = s[o + 2 * n]
+                dx = (s[o + 2 * n + 1:o + 3 * n + 1], s[o + 3 * n + 1:o + 4 * n + 1])
+                dxp = (s[o + 4 * n + 1:o + 5 * n + 1], s[o + 5 * n + 1:o + 6 * n + 1])
+                hasp = s[o + 6 * n + 1]
+                D = t - tp
+                u = 1 + ha / ca.if_else(hasp > 0, D, 1.0)
+                h00, h10 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u
+                h01, h11 = -2 * u**3 + 3 * u**2, u**3 - u**2
+                herm = tuple(h00 * xp[i] + h10 * D * dxp[i] + h01 * Xa[i] + h11 * D * dx[i]
+                             for i in (0, 1))
+                Xp = tuple(ca.if_else(hasp > 0, herm[i], Xa[i] + ha * dx[i]) for i in (0, 1))
+            else:
+                k1 = rhs(Xa, t)
+                k2 = rhs((Xa[0] + 0.5 * ha * k1[0], Xa[1] + 0.5 * ha * k1[1]), t + 0.5 * ha)
+                k3 = rhs((Xa[0] + 0.5 * ha * k2[0], Xa[1] + 0.5 * ha * k2[1]), t + 0.5 * ha)
+                k4 = rhs((Xa[0] + ha * k3[0], Xa[1] + ha * k3[1]), t + ha)
+                Xp = tuple(Xa[i] + ha / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
+                           for i in (0, 1))
+            tn = t + ha
+            THn, _ = theta(tn)
+            ok = _finite(ca.vertcat(*Xp))
+            Xp = tuple(ca.if_else(ok, Xp[i], Xa[i]) for i in (0, 1))
+            size = 1 + ca.mmax(absc(Xp) / sc)
+            prev = ca.inf
+            first = None
+            for _ in range(newton):
+                Hr, Hi, Jr, Ji = f_hj(Xp[0], Xp[1], THn[0], THn[1])
+                up = csolve(Jr, Ji, Hr, Hi, Xp)
+                fin = _finite(ca.vertcat(*up))
+                nrm = ca.if_else(fin, ca.mmax(absc(up) / sc) / size, ca.inf)
+                if first is None:
+                    first = nrm
+                ok = ca.logic_and(ca.logic_and(ok, fin), ca.logic_or(
+                    nrm <= ca.fmax(0.5 * prev, 1e-9), prev <= NOISE))
+                Xp = tuple(Xp[i] - ca.if_else(ok, up[i], 0) for i in (0, 1))
+                prev = nrm
+            small = ca.mmax(absc((Xa[0] - Xp[0], Xa[1] - Xp[1])) / sc)
+            accept = ca.logic_and(ca.logic_and(ok, prev <= accept_tol),
+                                  small <= 0.5 + 0.5 * ca.mmax(absc(Xa)))
+            acc = ca.logic_and(run, accept)
+            X1 = tuple(ca.if_else(acc, Xp[i], Xa[i]) for i in (0, 1))
+            t1 = ca.if_else(acc, tn, t)
+            hgrow = ca.fmin(h * ca.if_else(first < 1e-7, 2.0, grow), hmax)
+            h1 = ca.if_else(run, ca.if_else(accept, hgrow, 0.5 * h), h)
+            far = ca.mmax(absc(X1) / sc) > big
+            code = ca.if_else(far, ca.if_else(t1 >= 0.99, 2, 3),
+                              ca.if_else(ca.logic_and(ca.logic_not(accept), h1 < hmin), 3,
+                                         ca.if_else(t1 >= 1.0, 1, 0)))
+            st1 = ca.if_else(run, code, st)
+            s1 = ca.vertcat(X1[0], X1[1], t1, h1, st1, cnt + run)
+            if hermite:  # on acceptance: the tangent at the new point; the old one moves back
+                kn = rhs(Xp, tn)
+                keep = lambda a, b: ca.if_else(acc, a, b)  # noqa: E731
+                s1 = ca.vertcat(s1, keep(Xa[0], xp[0]), keep(Xa[1], xp[1]), keep(t, tp),
+                                keep(kn[0], dx[0]), keep(kn[1], dx[1]),
+                                keep(dx[0], dxp[0]), keep(dx[1], dxp[1]),
+                                ca.if_else(acc, 1.0, hasp))
+            # common subexpressions merged (the angles' cos and sin recur): a 3-RPR's step
+            # runs twice as fast compiled
+            opts = {"cse": True} if sx else {}
+            step = ca.Function("homotopy_step", [s, par], [s1], opts)
+            # the polish, in the same call: three Newton steps at the target (s(1) = 1) on the
+            # paths that have arrived (again in later calls: a converged point stays), and the
+            # condition number of Jx there (columns scaled), written out for the adjugate's
+            # orders, else from one evaluation in numpy (:func:`_endpoint_cond`)
+            X = Xa
+            TH1 = (th0[0] + d[0], th0[1] + d[1])
+            done = st == 1
+            for _ in range(3):
+                Hr, Hi, Jr, Ji = f_hj(X[0], X[1], TH1[0], TH1[1])
+                up = csolve(Jr, Ji, Hr, Hi, X)
+                use = ca.logic_and(done, _finite(ca.vertcat(*up)))
+                X = tuple(X[i] - ca.if_else(use, up[i], 0) for i in (0, 1))
+            S = ca.vertcat(X[0], X[1], s[2 * n:])
+            if self.fused_cond:
+                _, _, Jr, Ji = f_hj(X[0], X[1], TH1[0], TH1[1])
+                D = ca.repmat(sc.T, n, 1)
+                cond = ca.if_else(done, _adjugate_cond(Jr * D, Ji * D), ca.inf)
+            else:
+                cond = ca.inf
+            polish = ca.Function("homotopy_polish", [s, par], [S, cond], opts)
+            # CHUNK steps as a loop over the step (fold), then the polish: C code the size of
+            # one step (inlined, a 3-RPR's chunk took gcc 4-5 s; a loop, under a second)
+            ms, mp = ca.MX.sym("state", self.width), ca.MX.sym("par", par.shape[0])
+            # a path that has stopped is not stepped again (a branch in the compiled code):
+            # a call can hold many steps without paying them for the paths already done
+            live = ca.Function("homotopy_live_step", [ms, mp], [ca.if_else(
+                ms[2 * n + _ST] == 0, step(ms, mp), ms, True)])
+            last = live.fold(CHUNK)(ms, ca.repmat(mp, 1, CHUNK))
+            return ca.Function("homotopy_chunk", [ms, mp], polish(last, mp))
+
+        # built op by op in Python (a 3-RPR's SX step 0.13 s, a 6-6 platform's 0.03 s):
+        # kept serialized in the cache, read back in a few ms by the next process
+        self.chunk = cc.memo_function("homotopy_chunk", [
+            sys.f_sx.serialize(), repr((h0, hmax, hmin, big, accept_tol, grow, sx, newton,
+                                         predictor, CHUNK)), _source_digest()], build)
 
         # compiled in the background: until the library is ready (about a second), runs
         # use the interpreted chunk (a 3-RPR's call 11 ms instead of 1.4 ms, a 6-6
