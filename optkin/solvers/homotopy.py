@@ -99,7 +99,11 @@ class _Base:
         Ht = ca.jtimes(H, th, dth)
         f = ca.Function("homotopy", [x, th, dth], [ca.densify(H), Jx, ca.densify(Ht)],
                         ["x", "th", "dth"], ["H", "Jx", "Ht"])
-        self.f = self.f_sx = complexify(f)
+        # complexified op by op in Python (a 6-6 platform's 0.06 s): kept in the cache
+        from ..model import complexify as cx
+
+        self.f = self.f_sx = cc.memo_function(
+            "homotopy_cx", [f.serialize(), _source_digest(cx.__file__)], lambda: complexify(f))
         self.key = tag
         lib = cc.library(f"homotopy:{tag}", [self.f])  # None: no compiler, interpreted
         self.compiled = lib is not None
@@ -267,10 +271,11 @@ def _finite(v):
     return ca.sum1(ca.fabs(v)) < 1e300  # NaN and inf both fail
 
 
-@functools.lru_cache(maxsize=1)
-def _source_digest() -> str:
-    """A digest of this module's source: a stored tracker graph is one this code built."""
-    return hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
+@functools.lru_cache(maxsize=4)
+def _source_digest(path: str = __file__) -> str:
+    """A digest of a module's source (default this one): a graph kept in the cache is one
+    this code built."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 class _Tracker:
