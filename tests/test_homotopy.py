@@ -394,3 +394,37 @@ def test_interpreted_tracker_while_compiling_gives_the_compiled_numbers(tmp_path
             for _ in range(2)]
     assert any(runs[0]["interpreted"]) and not any(runs[1]["interpreted"])
     assert runs[0]["modes"] == runs[1]["modes"] and sum(map(len, runs[0]["modes"])) > 8
+
+
+def test_auto_keeps_the_homotopy_when_only_complex_endpoints_are_singular():
+    """A random planar 6-6 platform (the scaling benchmark's recipe, its instance 6) whose
+    homotopy ends four paths ill-conditioned at complex points near infinity (|x| ~ 1e5,
+    far from real): ``method="auto"`` keeps the homotopy, and its real modes are those of
+    the multistart (an independent method: random starts, Newton, IPOPT rescues)."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(0)
+    for i in range(7):  # the benchmark's stream: three kinds drawn in turn
+        if i % 3 == 0:
+            ab = np.sort(rng.uniform(0, 2 * np.pi, 6))
+            ap = np.sort(rng.uniform(0, 2 * np.pi, 6))
+            p = np.r_[rng.uniform(-0.1, 0.1, 2), rng.uniform(0.8, 1.2)]
+            R = Rotation.from_euler("ZYX", rng.uniform(-0.15, 0.15, 3)[::-1]).as_matrix()
+            base = np.c_[np.cos(ab), np.sin(ab), np.zeros(6)]
+            plat = 0.5 * np.c_[np.cos(ap), np.sin(ap), np.zeros(6)]
+            qa = np.linalg.norm(p + plat @ R.T - base, axis=1)
+        elif i % 3 == 1:
+            rng.uniform(-1, 1, (3, 2)), rng.uniform(-0.4, 0.4, (3, 2))
+            rng.uniform(-0.3, 0.3, 2), rng.uniform(-1, 1)
+        else:
+            rng.uniform(6, 10), rng.uniform(6, 9), rng.uniform(4, 6)
+    mech = optkin.mechanisms.stewart_gough(base, plat)
+    hom = optkin.assembly_modes(mech, qa, method="homotopy")
+    assert hom.stats.singular > 0 and hom.info["singular_near_real"] == 0
+    auto = optkin.assembly_modes(mech, qa)
+    assert auto.info["method"] == "homotopy" and auto.complete
+    ms = optkin.assembly_modes(mech, qa, method="multistart", seed=3)
+    assert len(auto) == len(ms) >= 2
+    for r in ms:
+        d = [np.max(np.abs(s.x - r.x)) for s in auto]
+        assert min(d) < 1e-7

@@ -145,8 +145,8 @@ ASSEMBLY_DEFAULTS: dict[str, Any] = {
     "method": "auto",  # "homotopy": parameter homotopy (optkin.solvers.homotopy);
     # "multistart"; "auto": the homotopy where the package ships the topology's start system
     # and no multistart option is given, kept when it finds a mode, its account is complete
-    # and no endpoint is singular (else the multistart: it also reports continua, and why
-    # no mode exists)
+    # and no singular endpoint is near the real space (else the multistart: it also reports
+    # continua, and why no mode exists)
     "jit": "auto",  # compile the step to C: True (wait for the compiler), False, "cached" (if
     # in the disk cache), "auto" ("cached" under 6 unknowns, else compiled in the background
     # while the first calls use the interpreted step)
@@ -916,7 +916,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         modes = homotopy_modes(mech, qa, seed=int(seed), tol=o["tol"],
                                time_limit=o["time_limit"], _checked=True)
         if o["method"] == "auto" and not (len(modes) and modes.complete
-                                          and modes.stats.singular == 0
+                                          and modes.info["singular_near_real"] == 0
                                           and modes.info["status"] != "iteration_limit"):
             tried = modes.info["message"]  # the multistart accounts for it (and continua)
         else:

@@ -1134,6 +1134,12 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     late = deadline.expired() and bool(np.any(P.status == "failed"))  # paths cut short
     fin, Xf, singular, jumped, _ = acc
     real = np.max(np.abs(Xf.imag) / sc, axis=1) < 1e-6
+    # singular endpoints that may be real (a double root on a singularity, a point of a
+    # real continuum): imaginary parts small beside the point's size; far from real ones
+    # (a 6-6 platform's complex solutions near infinity, |x| ~ 1e5 with cond 1e13) cannot
+    # hide a real mode
+    size = 1.0 + np.max(np.abs(Xf) / sc, axis=1)
+    near_real = np.max(np.abs(Xf.imag) / sc, axis=1) <= 1e-3 * size
     out: list[KinResult] = []
     seen: list[np.ndarray] = []
     ang = np.asarray(model.x_angle, dtype=bool)
@@ -1188,6 +1194,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
             "monodromy_loops": start.loops, "start_time": start.time, "gamma_tries": tries,
             "monodromy_stopped": start.stopped, "trace": start.trace,
             "start_pattern": "wider" if generic else "own",
+            "singular_near_real": int(np.sum(singular & near_real)),
             "time": time.perf_counter() - t0, "method": "homotopy"}
     # isolated solutions only when every path is accounted for and none ends singular (a
     # continuum's points end singular paths); else not known here
