@@ -464,6 +464,7 @@ def _start_builder(cc: str, d: Path, path: Path, tag: str, key: str,
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    proc.build_dir = tmp  # (removed by the builder; by _kill_builder if it is stopped)
     _BUILDERS[:] = [b for b in _BUILDERS if b.poll() is None] + [proc]
     return proc
 
@@ -538,6 +539,13 @@ def _lock_path(lib: Path) -> Path:
     return lib.with_suffix(".lock")
 
 
+def _lock_holder(lock: Path) -> tuple[str, str]:
+    """(pid, host) written in the build lock ``lock``. Raises OSError or ValueError as
+    :func:`_read_private` does."""
+    pid, _, host = _read_private(lock, 256).decode(errors="replace").partition(" ")
+    return pid, host.strip()
+
+
 def _holder_gone(lock: Path) -> bool:
     """Whether the build lock ``lock`` is abandoned: older than :data:`LOCK_STALE`, or
     written by a process of this host that no longer exists (a missing lock counts)."""
@@ -545,12 +553,12 @@ def _holder_gone(lock: Path) -> bool:
         st = os.lstat(lock)
         if time.time() - st.st_mtime > LOCK_STALE:
             return True
-        pid, _, host = _read_private(lock, 256).decode(errors="replace").partition(" ")
+        pid, host = _lock_holder(lock)
     except FileNotFoundError:
         return True
     except (OSError, ValueError):  # unreadable or not ours: honoured until it is stale
         return False
-    if host.strip() != _HOST or not pid.isdigit():
+    if host != _HOST or not pid.isdigit():
         return False
     try:
         os.kill(int(pid), 0)
@@ -588,28 +596,13 @@ def _claim(lib: Path) -> bool:
     return False
 
 
-def _release(lib: Path) -> None:
+def _release(lib: Path, *pids: int) -> None:
+    """Remove the build lock of ``lib`` when it names this process (or one of ``pids``)."""
     try:
-        pid = _read_private(_lock_path(lib), 256).decode(errors="replace").partition(" ")[0]
-        if pid == str(os.getpid()):
+        if _lock_holder(_lock_path(lib))[0] in {str(os.getpid()), *map(str, pids)}:
             os.unlink(_lock_path(lib))
     except (OSError, ValueError):
         pass
-
-
-def _await_other(path: Path, tag: str, key: str, funcs: Sequence[ca.Function],
-                 timeout: float) -> dict[str, ca.Function] | None:
-    """Wait (at most ``timeout`` s) for the library another process is building; None
-    when its build ended without one (or never ends)."""
-    end = time.monotonic() + timeout
-    pause = 0.01
-    while True:
-        gone = _holder_gone(_lock_path(path))  # first: a library installed before the lock
-        out = _load(path, tag, key, funcs)  # is removed is seen by the next line
-        if out is not None or gone or time.monotonic() > end:
-            return out
-        time.sleep(pause)
-        pause = min(2 * pause, 0.1)
 
 
 def libraries(
@@ -665,11 +658,8 @@ def libraries(
                 log.debug("optkin: compiler failed: %s", err.decode(errors="replace"))
                 continue
             out[k] = _load(path, tag, key, funcs)
-    for k, tag, key, path, funcs in others:
-        out[k] = _await_other(path, tag, key, funcs, COMPILE_LIMIT + 60)
-        if out[k] is None:  # its build failed or was abandoned: ours, once
-            out[k] = libraries([(tag, funcs)], build)[0] if _holder_gone(
-                _lock_path(path)) else None
+    for k, tag, key, path, funcs in others:  # (taken over if that process gives up)
+        out[k] = PendingLibrary(tag, key, path, funcs).wait() or None
     return out
 
 
@@ -682,15 +672,8 @@ def _kill_builder(proc: subprocess.Popen, path: Path) -> None:
     except OSError:
         pass
     proc.wait()
-    try:  # the lock names the builder (or still this process)
-        pid = _read_private(_lock_path(path), 256).decode(errors="replace").partition(" ")[0]
-        if pid in (str(proc.pid), str(os.getpid())):
-            os.unlink(_lock_path(path))
-    except (OSError, ValueError):
-        pass
-    for b in path.parent.glob(".build-*"):  # its directory holds path's C file
-        if (b / (path.stem + ".c")).exists():
-            shutil.rmtree(b, ignore_errors=True)
+    _release(path, proc.pid)  # the lock names the builder (or still this process)
+    shutil.rmtree(proc.build_dir, ignore_errors=True)
 
 
 class PendingLibrary:
@@ -728,7 +711,9 @@ class PendingLibrary:
         if now < self._next_look:
             return None
         self._next_look = now + 0.02
-        gone = _holder_gone(_lock_path(self.path))  # first: see _await_other
+        # the lock first: a library installed just before its lock is removed is then
+        # seen by the next line, not missed
+        gone = _holder_gone(_lock_path(self.path))
         lib = _load(self.path, self.tag, self.key, self.funcs)
         if lib is not None:
             self._out = lib

@@ -132,8 +132,8 @@ class Affinity:
     model (``benchmarks/test_scaling.py``).
 
     ``units`` are (cost, group) pairs in the runner's order (longest first); :meth:`take`
-    returns the index of the chosen unit; :meth:`put_back` returns a unit to the pool (a
-    worker that died), :meth:`leave` forgets a worker.
+    returns the index of the chosen unit (:meth:`take_any` for no worker); :meth:`put_back`
+    returns a unit to the pool (a worker that died), :meth:`leave` forgets a worker.
     """
 
     def __init__(self, units: list[tuple[float, str]], setup: float = SETUP_COST) -> None:
@@ -171,6 +171,14 @@ class Affinity:
             g = max(near, key=lambda h: (self.work[h] / (crowd.get(h, 0) + 1), self._head(h)))
         seen.add(g)
         self.on[worker] = g
+        return self._pop(g)
+
+    def take_any(self) -> int | None:
+        """The longest unit left, for no worker (the runner failing what is left)."""
+        live = [g for g, ix in self.left.items() if ix]
+        return self._pop(max(live, key=self._head)) if live else None
+
+    def _pop(self, g: str) -> int:
         i = self.left[g].pop(0)
         self.work[g] -= self.cost[i]
         return i

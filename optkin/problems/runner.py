@@ -803,7 +803,7 @@ def _units(todo: list[tuple[ProblemFileInfo, bytes]], pictures: bool, split: boo
     worker keeps the problem's model), else one unit per problem. Ties keep file order."""
     from optkin.problems.costs import PROBLEM_COST, task_costs, topology_group
 
-    units: list[tuple[float, int, Job]] = []
+    units: list[tuple[int, Job]] = []
     for n, (info, data) in enumerate(todo):
         spec = {"display": info.display, "data": data, "source": str(info.path),
                 "pictures": pictures}
@@ -813,16 +813,14 @@ def _units(todo: list[tuple[ProblemFileInfo, bytes]], pictures: bool, split: boo
         except Exception:  # noqa: BLE001 - the worker reports what is wrong with the file
             costs, group = [1.0], "?"
         if split and len(costs) > 1:
-            for i, c in enumerate(costs):
-                units.append((PROBLEM_COST + c, n,
-                              Job(f"{info.display}#{i}", dict(spec, only=[i]),
-                                  cost=PROBLEM_COST + c, group=group)))
+            units += [(n, Job(f"{info.display}#{i}", dict(spec, only=[i]),
+                              cost=PROBLEM_COST + c, group=group))
+                      for i, c in enumerate(costs)]
         else:
-            units.append((PROBLEM_COST + sum(costs), n,
-                          Job(info.display, spec, cost=PROBLEM_COST + sum(costs),
-                              group=group)))
-    units.sort(key=lambda u: (-u[0], u[1]))
-    return [u[2] for u in units]
+            units.append((n, Job(info.display, spec, cost=PROBLEM_COST + sum(costs),
+                                 group=group)))
+    units.sort(key=lambda u: (-u[1].cost, u[0]))
+    return [job for _, job in units]
 
 
 def _merge(name: str, parts: list[JobOutcome]) -> JobOutcome:

@@ -218,12 +218,10 @@ class _Pending:
         return self.jobs[self.policy.take(worker)]
 
     def popleft(self) -> Job:
-        for ix in self.policy.left.values():
-            if ix:
-                i = ix.pop(0)
-                self.policy.work[self.jobs[i].group] -= self.jobs[i].cost
-                return self.jobs[i]
-        raise IndexError("no pending job")
+        i = self.policy.take_any()
+        if i is None:
+            raise IndexError("no pending job")
+        return self.jobs[i]
 
     def appendleft(self, job: Job) -> None:
         self.policy.put_back(self.index[id(job)])
