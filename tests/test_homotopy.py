@@ -359,7 +359,7 @@ from optkin.model import get_model
 from optkin.solvers import homotopy as H
 from test_assembly_modes import DIET_A, DIET_B, DIET_L
 rng = np.random.default_rng(3)
-out, trackers = [], []
+out, trackers, first = [], [], []
 for k in range(4):
     if k < 2:
         a, b = rng.uniform(-10, 10, (3, 2)), rng.uniform(-4, 4, (3, 2))
@@ -367,20 +367,25 @@ for k in range(4):
     else:
         A = DIET_A + rng.uniform(-0.03, 0.03, DIET_A.shape)
         m, qa = optkin.mechanisms.stewart_gough(A, DIET_B), DIET_L
+    sy = H._system(get_model(m))  # just built: with an empty cache, its compile pending
+    first.append(sy._pending is not None)
     r = optkin.assembly_modes(m, qa, method="homotopy")
     out.append([s.x.tolist() for s in r])
     trackers.append(H._tracker(get_model(m)))
-print(json.dumps({"modes": out, "interpreted": [t._pending is not None for t in trackers]}))
+print(json.dumps({"modes": out, "interpreted": [t._pending is not None for t in trackers],
+                  "system_interpreted": first}))
 for t in trackers:  # let the libraries be stored for the next process
-    if t._pending is not None:
-        t._pending.wait()
+    for p in (t._pending, t.sys._pending):
+        if p is not None:
+            p.wait()
 """
 
 
 def test_interpreted_tracker_while_compiling_gives_the_compiled_numbers(tmp_path):
-    """With an empty cache the trackers compile in the background and the interpreted
-    ones answer meanwhile (a failed interpreted call is made again compiled); a second
-    process, which loads the compiled libraries, gives the same modes to the bit."""
+    """With an empty cache the trackers and the systems they track compile in the
+    background and the interpreted ones answer meanwhile (a failed interpreted call is
+    made again compiled); a second process, which loads the compiled libraries, gives the
+    same modes to the bit."""
     import json
     import os
     import subprocess
@@ -393,6 +398,7 @@ def test_interpreted_tracker_while_compiling_gives_the_compiled_numbers(tmp_path
                                       capture_output=True, timeout=600, check=True).stdout)
             for _ in range(2)]
     assert any(runs[0]["interpreted"]) and not any(runs[1]["interpreted"])
+    assert any(runs[0]["system_interpreted"]) and not any(runs[1]["system_interpreted"])
     assert runs[0]["modes"] == runs[1]["modes"] and sum(map(len, runs[0]["modes"])) > 8
 
 

@@ -105,11 +105,19 @@ class _Base:
         self.f = self.f_sx = cc.memo_function(
             "homotopy_cx", [f.serialize(), _source_digest(cx.__file__)], lambda: complexify(f))
         self.key = tag
-        lib = cc.library(f"homotopy:{tag}", [self.f])  # None: no compiler, interpreted
-        self.compiled = lib is not None
-        if lib is not None:
-            self.f = lib[self.f.name()]
+        # compiled in the background (a 6-6 platform's library takes gcc about a second,
+        # a 3-RPR's 0.3 s): meanwhile the interpreted Function answers, with the same
+        # numbers (no linear solve inside, nothing it could raise on that the compiled
+        # code would not), so that a topology's first call does not wait for the compiler
         self._maps: dict[int, ca.Function] = {}
+        self._pending: Any = None
+        lib = cc.start_library(f"homotopy:{tag}", [self.f])
+        if isinstance(lib, dict):
+            self.f = lib[self.f.name()]
+        elif lib is not None:
+            self._pending = lib
+        #: whether a compiler is (or will be) behind the system (False: none available)
+        self.compiled = lib is not None
         self.scale = np.asarray(scale, dtype=float)
 
     def eval(self, X: np.ndarray, TH: np.ndarray, DTH: np.ndarray):
@@ -123,6 +131,13 @@ class _Base:
             X = np.concatenate([X, np.repeat(X[:1], pad, 0)])
             TH = np.concatenate([TH, np.repeat(TH[:1], pad, 0)])
             DTH = np.concatenate([DTH, np.repeat(DTH[:1], pad, 0)])
+        if self._pending is not None:  # switch to the compiled code once it has landed
+            done = self._pending.poll()
+            if done is not None:
+                self._pending = None
+                if done is not False:
+                    self.f = done[self.f.name()]
+                    self._maps = {}
         fm = self._maps.get(N)
         if fm is None:  # through preallocated buffers: no numpy -> DM conversions
             fm = self._maps[N] = FastFn(self.f.map(N))
