@@ -461,3 +461,33 @@ def test_docstring_examples():
     mod = importlib.import_module("optkin.analysis.continuation")
     failures, tried = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
     assert tried > 0 and failures == 0
+
+
+def test_coarse_step_does_not_go_round_a_loop_it_jumped_to():
+    """A 3-RRR section at phi = pi/2 traced with step 0.25: the corrector jumps from one
+    parallel curve to a closed one and, before the loop check, went round it until
+    max_steps (14780 points, one curve 290 times over; the faces of that arrangement then
+    took hours). Now the run stops after one round: the coarse curves are the fine ones
+    (every coarse point within 2 % of the size of the section of the fine polylines),
+    with fewer points, and the sections' faces have the fine sections' areas."""
+    A = np.array([[0, 0], [10, 0], [5, 8.66]])
+    b = np.array([[-2, -1.15], [2, -1.15], [0, 2.31]])
+    m = optkin.mechanisms.rrr3(A, b, 5.0, 5.0)
+    sec = {"phi": np.pi / 2}
+    coarse = singular_curves(m, "workspace", ["parallel"], fixed=sec, step=0.25)
+    fine = singular_curves(m, "workspace", ["parallel"], fixed=sec, step=0.04)
+    assert coarse.success and fine.success
+    pc = np.vstack([c.points for c in coarse.curves])
+    assert len(pc) < sum(len(c.points) for c in fine.curves)
+
+    def dist(P, Z):  # from points P to the polyline Z, by brute force over its segments
+        a, d = Z[:-1], np.diff(Z, axis=0)
+        s = np.clip(np.einsum("pkj,kj->pk", P[:, None] - a, d) / np.einsum("kj,kj->k", d, d),
+                    0, 1)
+        return np.min(np.linalg.norm(P[:, None] - (a + s[..., None] * d), axis=2), axis=1)
+
+    near = np.min([dist(pc, c.points) for c in fine.curves if len(c.points) > 1], axis=0)
+    assert near.max() < 0.02 * np.ptp(np.vstack([c.points for c in fine.curves]), axis=0).max()
+    a_c = sorted(a.area for a in optkin.aspects(m, fixed=sec, step=0.25).aspects)
+    a_f = sorted(a.area for a in optkin.aspects(m, fixed=sec).aspects)
+    assert len(a_c) == len(a_f) and np.allclose(a_c, a_f, rtol=0.05, atol=0.05)

@@ -154,61 +154,64 @@ def _overlap(f: Face, g: Face) -> bool:
 
 
 class _FreeTest:
-    """Is a configuration (x, y, phi) free: every stroke within its limits and det W_p of
-    a given sign? The legs' closed-form inverses (the model's planar chart) and det W_p of
-    the model, vectorised."""
+    """Is a configuration (x, y, phi) free in a working mode: every stroke within its
+    limits, the legs' postures those of the mode (the signs of diag B) and det A of a given
+    sign? The legs' closed-form inverses (the model's planar chart, every posture
+    combination) and det A, diag B of the augmented system the sections label their faces
+    with, vectorised."""
 
     def __init__(self, mech, model, limits) -> None:
-        import casadi as ca
-
         from ..model.charts import planar_chart
+        from .continuation import augmented_system
 
         self.model = model
         self.chart = planar_chart(model)
-        topo = model.topology
-        st = topo.st
-        self.det = topo.cached("aspects3d:det", lambda: ca.Function(
-            "detWp", [st.qa, st.x, st.p], [ca.det(ca.jacobian(topo.phi_sym, st.x))]))
-        self._maps: dict[int, Any] = {}
+        # the sections' system (at a fixed orientation): det A and diag B at full points
+        turn = [model.na + i for i, a in enumerate(model.x_angle) if a]
+        self.sys = augmented_system(mech, "parallel", tuple(turn))
         names = list(mech.active_names)
         self.lim = [(names.index(k), float(v[0]), float(v[1]))
                     for k, v in dict(limits or {}).items()]
 
-    def _det(self, qa: np.ndarray, X: np.ndarray) -> np.ndarray:
-        """det W_p at the rows of (qa, X): mapped over padded power-of-two blocks, the
-        maps built once (they had been built per call: 1226 maps in one 3-RPR's aspects)."""
-        from ..model.compiled import FastFn
-
-        N = len(X)
-        n = 1 << max(0, (N - 1).bit_length())
-        fm = self._maps.get(n)
-        if fm is None:
-            fm = self._maps[n] = FastFn(self.det.map(f"detWp_{n}", "serial", n, [2], []),
-                                        fixed=[self.model.p])
-        A = np.zeros((n, qa.shape[1] + X.shape[1]))
-        A[:N, :qa.shape[1]], A[:N, qa.shape[1]:] = qa, X
-        A[N:] = A[:1]  # padding: a real point, no NaN
-        out = fm(np.ascontiguousarray(A[:, :qa.shape[1]]).ravel(),
-                 np.ascontiguousarray(A[:, qa.shape[1]:]).ravel())
-        return out[0][:N].copy()
-
-    def vertical(self, P: np.ndarray, a: float, b: float, sign: int, n: int = 24) -> np.ndarray:
-        """For each point P (k, 2): free with det sign ``sign`` at n + 1 orientations from
-        a to b."""
+    def vertical(self, P: np.ndarray, a: float, b: float, sign: int, mode: tuple[int, ...],
+                 n: int = 24) -> np.ndarray:
+        """For each point P (k, 2): free in working mode ``mode`` with det sign ``sign`` at
+        n + 1 orientations from a to b."""
         k = len(P)
         ph = np.linspace(a, b, n + 1)
         X = np.zeros((k * len(ph), 3))
         X[:, 0] = np.repeat(P[:, 0], len(ph))
         X[:, 1] = np.repeat(P[:, 1], len(ph))
         X[:, 2] = ((np.tile(ph, k) + np.pi) % (2 * np.pi)) - np.pi
-        # one posture combination (checked in aspects3d): the legs' only inverse
-        V, ok = next(iter(self.chart.full_points(X)))
-        qa = V[:, :self.model.na]
-        for j, lo, hi in self.lim:
-            ok &= (qa[:, j] >= lo) & (qa[:, j] <= hi)
-        d = self._det(qa, X)
-        ok &= np.sign(d) == sign
-        return ok.reshape(k, len(ph)).all(axis=1)
+        free = np.zeros(len(X), bool)
+        want = np.asarray(mode, dtype=int)
+        for V, ok in self.chart.full_points(X):  # one posture combination at a time
+            qa = V[:, :self.model.na]
+            for j, lo, hi in self.lim:
+                ok &= (qa[:, j] >= lo) & (qa[:, j] <= hi)
+            idx = np.flatnonzero(ok)
+            if not len(idx):
+                continue
+            d, B = self.sys.aux_many(V[idx].T)
+            good = (np.sign(d) == sign) & np.all(np.sign(B.T).astype(int) == want, axis=1)
+            free[idx[good]] = True
+        return free.reshape(k, len(ph)).all(axis=1)
+
+    def label(self, V: np.ndarray) -> tuple[tuple[int, ...], int]:
+        """The working mode and the sign of det A of a configuration V = (q_a, x)."""
+        d, B = self.sys.aux_many(np.asarray(V, dtype=float)[:, None])
+        return tuple(int(v) for v in np.sign(B[:, 0])), int(np.sign(d[0]))
+
+
+@dataclass
+class _Section:
+    """What :func:`aspects3d` keeps of a section: its outcome and its faces
+    (working mode, det sign, face, representative configuration)."""
+
+    success: bool
+    status: str
+    message: str
+    faces: list[tuple[tuple[int, ...], int, Face, np.ndarray]]
 
 
 class _Find:
@@ -283,22 +286,21 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
                              "(three actuators; unknowns x, y and one orientation)")
     from ..model.charts import planar_chart
 
-    chart = planar_chart(model)
-    if chart is None or chart.n_combos != 1:
-        raise MechanismError(f"aspects3d: {mech.name}'s legs have several postures (working "
-                             "modes); only legs with one inverse (3-RPR) are handled yet: "
-                             "use optkin.aspects(mech, fixed={...}) for sections")
+    if planar_chart(model) is None:
+        raise MechanismError(f"aspects3d: {mech.name}'s legs are not distance constraints "
+                             "with one actuator each (3-RPR, 3-RRR, 3-PRR): no planar chart")
     angle = turn[0]
     cache: dict[float, Any] = {}
 
-    def section(phi: float):
-        if phi not in cache:
-            cache[phi] = aspects(mech, fixed={angle: phi}, limits=limits, bounds=bounds,
-                                 step=step)
+    def section(phi: float) -> _Section:
+        if phi not in cache:  # only the faces are kept (a 3-RRR section's curves: ~20 MB)
+            r = aspects(mech, fixed={angle: phi}, limits=limits, bounds=bounds, step=step)
+            cache[phi] = _Section(r.success, r.status, r.message,
+                                  [(a.working_mode, a.det_sign, a.face, a.v) for a in r.aspects])
         return cache[phi]
 
     def faces(phi):
-        return [(a.working_mode, a.det_sign, a.face, a) for a in section(phi).aspects]
+        return section(phi).faces
 
     free = _FreeTest(mech, model, limits)
     rng = np.random.default_rng(0)
@@ -335,7 +337,7 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
                 P = inner(((p0 + np.pi) % (2 * np.pi)) - np.pi, i)
                 if not len(P):
                     continue
-                ok = free.vertical(P, p0, p1, d0)
+                ok = free.vertical(P, p0, p1, d0, m0)
                 for pt in P[ok]:
                     for j, (m1, d1, g, _) in enumerate(dst):
                         if m1 == m0 and d1 == d0 and point_in_face(g, pt[None])[0]:
@@ -410,12 +412,12 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
             span = [ph[(g + 1) % len(ph)], ph[g]]
         bbox = np.array([[pts[:, 0].min(), pts[:, 0].max()], [pts[:, 1].min(), pts[:, 1].max()],
                          span])
-        _, (wm, d, _, asp) = max(secs, key=lambda s: s[1][2].area)
-        out.append(Aspect3D(tuple(wm), int(d), vol, bbox, asp.v.copy(),
+        _, (wm, d, _, v) = max(secs, key=lambda s: s[1][2].area)
+        out.append(Aspect3D(tuple(wm), int(d), vol, bbox, v.copy(),
                             [(p, f) for p, (_, _, f, _) in secs]))
     out.sort(key=lambda a: -a.volume)
     if modes:
-        _count_modes(mech, model, out, faces, order)
+        _count_modes(mech, free, out, order)
     n = len(out)
     msg = (f"{n} aspect(s) of {mech.name} in (x, y, {angle}) from {len(order)} sections "
            f"({int(slices)} even, {len(order) - int(slices)} added where the sections' faces "
@@ -426,24 +428,23 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
                      time.perf_counter() - t0, (model.x_names[0], model.x_names[1], angle))
 
 
-def _count_modes(mech, model, out, faces, order) -> None:
-    """At each aspect's representative q_a, how many assembly modes lie in it (each mode
-    placed by the face containing it in the nearest section of its orientation)."""
+def _count_modes(mech, free: _FreeTest, out, order) -> None:
+    """At each aspect's representative q_a, how many assembly modes lie in it (each mode of
+    the aspect's working mode and det sign placed by the face containing it in the nearest
+    section of its orientation)."""
     from ..solvers.enumerate import assembly_modes
-    from .velocity import jacobians
 
     order = np.array(order)
+    na = free.model.na
     for a in out:
-        qa = a.v[:model.na]
+        qa = a.v[:na]
         sols = assembly_modes(mech, qa)
         n = 0
         for s in sols:
-            phi = float(((s.x[2] + np.pi) % (2 * np.pi)) - np.pi)
-            k = int(np.argmin(np.abs(np.angle(np.exp(1j * (order - phi))))))
-            sign = int(np.sign(np.linalg.det(jacobians(mech, s).W_p)))
-            if sign != a.det_sign:
+            if free.label(np.r_[qa, s.x]) != (tuple(a.working_mode), a.det_sign):
                 continue
-            p = order[k]
+            phi = float(((s.x[2] + np.pi) % (2 * np.pi)) - np.pi)
+            p = order[int(np.argmin(np.abs(np.angle(np.exp(1j * (order - phi))))))]
             inside = [f for q, f in a.sections if q == p]
             if any(bool(point_in_face(f, s.x[None, :2])[0]) for f in inside):
                 n += 1

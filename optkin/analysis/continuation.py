@@ -254,7 +254,9 @@ class Curve:
     closed : bool
         The curve closes on itself (angles modulo 2 pi).
     ends : tuple of str
-        How each end stopped: ``"closed"``, ``"boundary"``, ``"branch"`` or ``"stalled"``.
+        How each end stopped: ``"closed"``, ``"boundary"``, ``"branch"``, ``"stalled"``,
+        ``"max_steps"``, or ``"jumped"`` (the run came round a loop that does not pass
+        through its start: the corrector had jumped to another, closed, curve).
     working_mode : ndarray (N, na) of int, or None
         Signs of the B_jj at every point (leg mechanisms).
     """
@@ -520,7 +522,8 @@ class _Tracer:
         h = self.hmax * 0.25
         arc = 0.0
         budget = self.budget
-        for _ in range(self.max_steps):
+        tans = [t0]  # the tangent at each point (the check for a loop not through u0)
+        for k_step in range(self.max_steps):
             if budget.exhausted():
                 return pts, budget.reason
             up = u + h * t
@@ -557,11 +560,23 @@ class _Tracer:
                     pts.append(ub)
                 return pts, "boundary"
             pts.append(un)
+            tans.append(tn)
             budget.points += 1
             arc += step
             # closure
             if arc > 3 * h and np.linalg.norm(self.diff(un, u0)) < 1.2 * max(h, step):
                 return pts, "closed"
+            # a loop that does not pass through u0: the corrector has jumped to another
+            # curve, a closed one, and would go round it until max_steps (a 3-RRR section
+            # traced with step 0.25 went round one 290 times, and the faces of that
+            # arrangement took hours); a point passed again in the same direction (not a
+            # crossing of the curve with itself) ends the run
+            if k_step % 4 == 3 and len(pts) > 12:
+                D = np.asarray(pts[1:-10]) - un
+                D[:, self.per] = _wrap(D[:, self.per])
+                near = np.einsum("ij,ij->i", D, D) < (0.6 * max(h, step)) ** 2
+                if near.any() and np.any(np.asarray(tans[1:-10])[near] @ tn > np.cos(0.25)):
+                    return pts, "jumped"
             if stop_at_bps and arc > 2 * h:
                 for ib, b in enumerate(self.bps):
                     if ib == start_bp and arc < 4 * self.hmax:
@@ -1243,8 +1258,8 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     if budget.reason is not None:
         ok, status = False, budget.reason
         msg += "; " + budget.message(where)
-    if any("max_steps" in c.ends or "stalled" in c.ends for c in curves):
-        msg += "; some curves stopped early (stalled or max_steps)"
+    if any("max_steps" in c.ends or "stalled" in c.ends or "jumped" in c.ends for c in curves):
+        msg += "; some curves stopped early (stalled, max_steps or jumped to another curve)"
     per_plane = tuple(bool(p and (b[1] - b[0]) >= TWO_PI - 1e-9) for p, b in zip(per2, bounds_arr))
     return SingularCurves(
         mechanism=mech.name, names=names, plane=(names[pidx[0]], names[pidx[1]]),
