@@ -103,3 +103,30 @@ def test_arguments_and_dispatch():
     # the five-bar (2-DoF) keeps its planar aspects
     assert isinstance(optkin.aspects(optkin.mechanisms.five_bar(9, 8, 5, 5, 8)),
                       optkin.Aspects)
+
+
+def test_arc_corrected_areas_and_the_phi_integral():
+    """The face areas and the integral over phi behind the volumes, against closed forms:
+    an inscribed N-gon's arc-corrected area converges to pi r^2 as N^-4 (the polygon's as
+    N^-2), a half disc's too (its two corners add nothing); the integral of a smooth
+    periodic function sampled at uneven angles, and of one present on part of the circle
+    only (an aspect born and dying), beats the trapezoid rule's accuracy."""
+    from optkin.analysis.aspects3d import _integrate
+    from optkin.analysis.planar import arc_area, ring_area
+
+    for N in (24, 48, 96):
+        t = np.linspace(0, 2 * np.pi, N, endpoint=False)
+        R = 2.0 * np.c_[np.cos(t), np.sin(t)]
+        assert abs(4 * np.pi - arc_area(R)) < 0.2 * (2 * np.pi / N) ** 4 * 4
+        assert abs(4 * np.pi - ring_area(R)) > 0.5 * (2 * np.pi / N) ** 2 * 4 / 6
+        assert np.isclose(arc_area(R[::-1]), -arc_area(R))  # a hole: clockwise
+    t = np.linspace(0, np.pi, 49)
+    assert abs(np.pi / 2 - arc_area(np.c_[np.cos(t), np.sin(t)])) < 1e-5
+    rng = np.random.default_rng(1)
+    phi = np.sort(rng.uniform(-np.pi, np.pi, 96))
+    A = 5 + np.cos(phi) + 0.5 * np.sin(2 * phi)  # integral 10 pi
+    P, F = np.r_[phi, phi[0] + 2 * np.pi], np.r_[A, A[0]]
+    trap = np.sum(0.5 * np.diff(P) * (F[1:] + F[:-1]))
+    assert abs(_integrate(phi, A) - 10 * np.pi) < 0.1 * abs(trap - 10 * np.pi)
+    B = np.where(np.abs(phi) < 1, np.cos(phi * np.pi / 2) ** 2, 0.0)  # integral 1
+    assert abs(_integrate(phi, B) - 1.0) < 1e-2

@@ -352,6 +352,13 @@ def _first_range(who: str, model, names, lim) -> tuple[float, float]:
     return chart.actuator_range(0)
 
 
+def min_face_area(snap: float) -> float:
+    """Faces smaller than this are dropped as slivers (see :func:`_region_faces`): a
+    chord of a traced curve (at most ``snap / 3`` long, turning at most 0.25 rad) leaves a
+    sliver of at most about 0.02 of its length squared against the boundary it touches."""
+    return 0.02 * (snap / 3.0) ** 2
+
+
 def _region_faces(chart, curves, mode, bounds, snap, pidx, fixed_map, lim_map, with_parallel):
     kinds = ("serial", "limit", "parallel") if with_parallel else ("serial", "limit")
     lines = _runs(curves, mode, kinds)
@@ -360,7 +367,7 @@ def _region_faces(chart, curves, mode, bounds, snap, pidx, fixed_map, lim_map, w
     # slivers between a chord of a curve and the boundary it touches (a parallel curve meets
     # the workspace boundary tangentially, at a fold) are below the resolution of the
     # polylines: faces smaller than a fraction of a step squared are dropped
-    min_area = 0.02 * (snap / 3.0) ** 2
+    min_area = min_face_area(snap)
     for f in faces(lines, snap=snap):
         if f.point is None or f.area < min_area:
             continue

@@ -13,18 +13,25 @@ phi from a point inside one of them that stays free (strokes kept, det A of that
 vectorised). Where a face that is not tiny (area above ``tiny`` times the section's
 largest) finds no partner across a gap, the gap is bisected, down to ``min_gap``: an
 aspect born, dying, splitting or merging there is then located between two close
-sections, and faces on either side link across it. The volume of an aspect is the
-integral over phi of its section's area (trapezoid weights over the sections, each area
-exact); its bounding box and a representative configuration come from its faces.
+sections, and faces on either side link across it (a face near the sections' sliver
+threshold, which one section keeps and the next drops, is no such event). The volume of
+an aspect is the integral over phi of its section's area: each face's area corrected for
+the arcs between its traced vertices (:func:`optkin.analysis.planar.arc_area`), the
+integral the trapezoid rule less its curvature term (:func:`_integrate`); its bounding
+box and a representative configuration come from its faces.
 
 Measured on the cuspidal 3-RPR of Zein, Wenger and Chablat with strokes [10, 30]
-(tests/test_aspects3d.py): 2 aspects of volumes 2096.87 and 2068.76 (length^2 rad) from
-36 even sections and 100 added (about 30 s here); a 240^3 voxel grid of the sign of det A
-finds the same two components, 2097.7 and 2069.5, in 3.7 s. The method is exact in x and y
-but not in phi, and slow (0.2-0.3 s per section, the continuation of every section's
-curves): the exact topology-changing orientations and a faster section are the next
-steps (see the issue tracker). An aspect whose whole extent in phi is shorter than
-``min_gap`` may be missed, and a neck thinner than it in phi may join or split aspects.
+(tests/test_aspects3d.py): 2 aspects of volumes 2097.5 and 2069.7 (length^2 rad) from
+36 even sections and 52 added, 13-15 s here; the same with 144 sections at step 0.08
+(50 s): 2097.0 and 2068.7; voxel grids of the sign of det A find the same two
+components, 2097.7 and 2069.5 at 240^3 (4 s), 2096.6 and 2068.2 at 320^3 (11 s), 2097.4
+and 2068.7 at 400^3 (23 s). The method is exact in x and y but not in phi, and slow
+(0.15 s per section, the continuation of every section's curves): the exact
+topology-changing orientations and a faster section are the next steps (see the issue
+tracker). An aspect whose whole extent in phi is shorter than ``min_gap`` may be
+missed, and a neck thinner than it in phi may join or split aspects. Legs with several
+postures (3-RRR) are refused: the free test and the count of modes handle working
+modes, but the sections' faces do not link reliably yet.
 """
 
 from __future__ import annotations
@@ -38,7 +45,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
-from .planar import Face, point_in_face
+from .planar import Face, face_arc_area, point_in_face
 
 __all__ = ["Aspect3D", "Aspects3D", "aspects3d"]
 
@@ -286,11 +293,23 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
                              "(three actuators; unknowns x, y and one orientation)")
     from ..model.charts import planar_chart
 
-    if planar_chart(model) is None:
+    chart = planar_chart(model)
+    if chart is None:
         raise MechanismError(f"aspects3d: {mech.name}'s legs are not distance constraints "
                              "with one actuator each (3-RPR, 3-RRR, 3-PRR): no planar chart")
+    if chart.n_combos != 1:
+        # the free test and the count of modes handle working modes, but the sections'
+        # faces do not link reliably yet: a 3-RRR (equilateral base of side 10, links 5)
+        # gave 255 fragments in 235 sections where a voxel grid has 16 aspects
+        raise MechanismError(f"aspects3d: {mech.name}'s legs have several postures (working "
+                             "modes); only legs with one inverse (3-RPR) are handled yet: "
+                             "use optkin.aspects(mech, fixed={...}) for sections")
     angle = turn[0]
     cache: dict[float, Any] = {}
+    from .aspects import min_face_area
+    from .continuation import DEFAULT_STEP
+
+    floor = min_face_area(3.0 * float(step or DEFAULT_STEP) * model.length)
 
     def section(phi: float) -> _Section:
         if phi not in cache:  # only the faces are kept (a 3-RRR section's curves: ~20 MB)
@@ -365,8 +384,10 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
         wb = ((b + np.pi) % (2 * np.pi)) - np.pi
         big_a = max((f[2].area for f in faces(wa)), default=0.0)
         big_b = max((f[2].area for f in faces(wb)), default=0.0)
-        large = any(faces(wa)[i][2].area > tiny * big_a for i in ua) or any(
-            faces(wb)[j][2].area > tiny * big_b for j in ub)
+        # a face near the sections' sliver threshold may be kept in one section and
+        # dropped in the next: its lack of a partner is no event to locate
+        large = any(faces(wa)[i][2].area > max(tiny * big_a, 2 * floor) for i in ua) or any(
+            faces(wb)[j][2].area > max(tiny * big_b, 2 * floor) for j in ub)
         if not large or b - a <= min_gap:
             done_gaps.append((a, b, pairs))
             continue
@@ -391,15 +412,15 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
     for p in sorted(cache):
         for i in range(len(faces(p))):
             groups.setdefault(find.root((p, i)), []).append((p, i))
-    # the trapezoid weight of every section: half of its two gaps
     order = sorted(cache)
-    ext = [order[-1] - 2 * np.pi, *order, order[0] + 2 * np.pi]
-    weight = {p: 0.5 * (ext[k + 2] - ext[k]) for k, p in enumerate(order)}
     spacing = 2 * np.pi / int(slices)
     out: list[Aspect3D] = []
     for members in groups.values():
         secs = [(p, faces(p)[i]) for p, i in members]
-        vol = float(sum(weight[p] * f.area for p, (_, _, f, _) in secs))
+        area = dict.fromkeys(order, 0.0)
+        for p, (_, _, f, _) in secs:
+            area[p] += face_arc_area(f)
+        vol = _integrate(np.array(order), np.array([area[p] for p in order]))
         pts = np.vstack([f.outer for _, (_, _, f, _) in secs])
         ph = np.unique([p for p, _ in secs])
         # its extent in phi: the circle minus the largest gap between its sections (a
@@ -426,6 +447,27 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
     return Aspects3D(mech.name, out, np.array(order), not late,
                      "iteration_limit" if late else "optimal", msg,
                      time.perf_counter() - t0, (model.x_names[0], model.x_names[1], angle))
+
+
+def _integrate(phi: np.ndarray, A: np.ndarray) -> float:
+    """The integral over the circle of a function sampled at the sorted angles ``phi``
+    (an aspect's section areas, 0 where it has none): the trapezoid rule less, on each
+    interval, h^3 / 12 times the second derivative (the mean of the second divided
+    differences at its two ends, where the function is present at the three points each
+    needs). Areas are smooth between the sections the refinement put around births,
+    deaths, splits and merges; there the intervals are short and the correction small."""
+    n = len(phi)
+    P = np.r_[phi[-1] - 2 * np.pi, phi, phi[0] + 2 * np.pi]
+    F = np.r_[A[-1], A, A[0]]
+    h = np.diff(P)  # h[k]: from P[k] to P[k + 1]
+    trap = float(np.sum(0.5 * h[1:n + 1] * (F[1:n + 1] + F[2:n + 2])))
+    # second divided differences at the samples (P[1..n]), NaN where not all present
+    d2 = 2 * ((F[2:] - F[1:-1]) / h[1:] - (F[1:-1] - F[:-2]) / h[:-1]) / (h[1:] + h[:-1])
+    d2[(F[:-2] <= 0) | (F[1:-1] <= 0) | (F[2:] <= 0)] = np.nan
+    D = np.r_[d2, d2[0]]  # D[k]: at phi[k] (periodic)
+    mid = 0.5 * (D[:-1] + D[1:])  # on the interval from phi[k] to phi[k + 1]
+    corr = np.where(np.isfinite(mid), h[1:n + 1] ** 3 / 12.0 * mid, 0.0)
+    return trap - float(np.sum(corr))
 
 
 def _count_modes(mech, free: _FreeTest, out, order) -> None:
