@@ -491,3 +491,46 @@ def test_coarse_step_does_not_go_round_a_loop_it_jumped_to():
     a_c = sorted(a.area for a in optkin.aspects(m, fixed=sec, step=0.25).aspects)
     a_f = sorted(a.area for a in optkin.aspects(m, fixed=sec).aspects)
     assert len(a_c) == len(a_f) and np.allclose(a_c, a_f, rtol=0.05, atol=0.05)
+
+
+def test_one_call_corrector_takes_the_python_newton_steps(rpr):
+    """The corrector's first steps in one Function against Newton on [G; t.(u - a)] = 0
+    written here with numpy (the tracer's own G and J): from predictions off a traced
+    curve of the 3-RPR, the same point after the same number of steps, to rounding."""
+    from optkin.analysis import continuation as C
+
+    res = singular_curves(rpr, "workspace", ["parallel"], fixed={"phi": 0.3})
+    sys = C.augmented_system(rpr, "parallel", (5,))
+    tr = C._Tracer(sys, np.array([0.3]), 0.0, (3, 4), res.bounds, 0.25, 1e-11, 100)
+    rng = np.random.default_rng(0)
+    Z = np.vstack([c.points for c in res.curves])
+    compared = 0
+    for P in Z[rng.choice(len(Z), 20, replace=False)]:
+        V = next(v[0] for v, ok in tr_points(rpr, P, 0.3) if ok[0])
+        u0 = np.r_[V[:3], V[3:5]] / tr.scl
+        _, J = tr.GJ(u0)
+        t = np.linalg.svd(J)[2][-1]
+        up = u0 + 0.1 * t + 0.02 * rng.normal(size=5)
+        u, k = tr.correct(up, t)
+        ref, kr = up.copy(), None  # numpy Newton
+        for it in range(10):
+            g, Jr = tr.GJ(ref)
+            F = np.r_[g, t @ (ref - up)]
+            if np.abs(g).max() < 1e-11 and abs(F[-1]) < 1e-10:
+                kr = it
+                break
+            ref = ref + np.linalg.solve(np.vstack([Jr, t]), -F)
+        if kr is None:
+            continue
+        assert u is not None and k == kr
+        assert np.allclose(u, ref, rtol=0, atol=1e-9)
+        compared += 1
+    assert compared >= 15
+
+
+def tr_points(mech, P, phi):
+    """Full points (rho, x, y, phi) over the platform position P at orientation phi."""
+    from optkin.model import get_model
+    from optkin.model.charts import planar_chart
+
+    return planar_chart(get_model(mech)).full_points(np.array([[P[0], P[1], phi]]))

@@ -133,6 +133,49 @@ class _Functions:
         self.aux = ca.Function("aux", [v, p], [ca.det(Wp), bdiag])
         self.cfun = None if c is None else ca.Function("c", [v, lim, p], [c])
         self._maps: dict[int, Any] = {}
+        self._corrector: ca.Function | None = None
+
+    def corrector(self) -> ca.Function:
+        """The first :data:`CORRECTOR_STEPS` Newton steps of the tracer's corrector (its
+        :meth:`_Tracer.correct`) in one Function, the graph built on first use: from the
+        prediction ``u`` (scaled), Newton on [G; t.(u - a)] = 0; each step taken only while
+        the point has not converged (max |G| < tol and |t.(u - a)| < 1e-10) and while the
+        steps stay finite and within ``cap``. Outputs: the point, ``done`` (converged; the
+        step count ``k`` at which it did and J there), ``failed`` (a step not finite or
+        longer than cap). Neither: the caller goes on from the point in Python."""
+        if self._corrector is None:
+            nz, m = self.nz, self.n_rows
+            nw = int(self.GJw.size1_in(0))
+            u0, a, t, scl = (ca.SX.sym(n, nz) for n in ("u", "a", "t", "scl"))
+            rest = ca.SX.sym("rest", nw - nz)
+            tol, cap = ca.SX.sym("tol"), ca.SX.sym("cap")
+            p = ca.SX.sym("p", self.GJw.size1_in(1))
+
+            def gj(u):
+                out = self.GJw(ca.vertcat(u * scl, rest), p)
+                return out[:m], ca.reshape(out[m:], m, nz) * ca.repmat(scl.T, m, 1)
+
+            u, done, fail = u0, ca.SX(0), ca.SX(0)
+            kk, Jd = ca.SX(0), ca.SX.zeros(m, nz)
+            for k in range(CORRECTOR_STEPS):
+                g, J = gj(u)
+                fm = ca.dot(t, u - a)
+                conv = ca.logic_and(ca.mmax(ca.fabs(g)) < tol, ca.fabs(fm) < 1e-10)
+                act = ca.logic_and(ca.logic_not(done), ca.logic_not(fail))
+                new = ca.logic_and(act, conv)
+                kk = ca.if_else(new, k, kk)
+                Jd = ca.if_else(new, J, Jd)
+                done = ca.logic_or(done, new)
+                du = -ca.solve(ca.vertcat(J, t.T), ca.vertcat(g, fm))
+                go = ca.logic_and(act, ca.logic_not(conv))
+                ok = ca.norm_2(du) <= cap  # false for inf and NaN too
+                fail = ca.logic_or(fail, ca.logic_and(go, ca.logic_not(ok)))
+                u = ca.if_else(ca.logic_and(go, ok), u + du, u)
+            self._corrector = ca.Function(
+                "corrector", [u0, a, t, rest, scl, tol, cap, p], [u, done, fail, kk, Jd],
+                ["u", "a", "t", "rest", "scl", "tol", "cap", "p"],
+                ["u_out", "done", "failed", "k", "J"])
+        return self._corrector
 
     def mapped(self, key: int, build: Any) -> Any:
         f = self._maps.get(key)
@@ -165,6 +208,7 @@ class _System:
         self.geo = model.p
         # a call buffer: ~1 us per evaluation instead of ~60 us through the Python wrapper
         self._fast = FastFn(self.fn.GJw, fixed=(model.p,))
+        self._corr = FastFn(self.fn.corrector(), fixed=(model.p,))
         self._lock = threading.Lock()
 
     def G(self, z: np.ndarray, pfix: np.ndarray, lim: float) -> np.ndarray:
@@ -181,6 +225,19 @@ class _System:
             (out,) = self._fast(w)
             return out.copy()
 
+    def correct(self, up, a, t, rest, scl, tol, cap):
+        """The corrector's first steps (:meth:`_Functions.corrector`): (u, done, failed,
+        k, J), copies (thread-safe)."""
+        with self._lock:
+            r = self._corr(up, a, t, rest, scl, tol, cap)
+            ok = self._corr.ok()
+            u, done, failed, k = r[0].copy(), bool(r[1][0]), bool(r[2][0]), int(r[3][0])
+            # J (m, nz), dense: stored by columns
+            J = r[4].reshape(self.nz, self.n_rows).T.copy() if done else None
+        if not ok or not np.all(np.isfinite(u)):
+            return u, False, True, 0, None
+        return u, done, failed, k, J
+
     def aux_one(self, v: np.ndarray) -> tuple[float, np.ndarray]:
         d, b = self.fn.aux(v, self.geo)
         return float(np.array(d).ravel()[0]), np.array(b).ravel()
@@ -194,6 +251,10 @@ class _System:
         d, b = _in_blocks(self.fn, self.fn.aux, -(10**6), V, [1], (self.geo,))
         return d.ravel(), b.reshape(self.na, n)
 
+
+#: Newton steps of the tracer's corrector taken in one call of a Function
+#: (:meth:`_Functions.corrector`); a point not converged by then goes on in Python.
+CORRECTOR_STEPS = 4
 
 #: Columns per evaluation of a mapped Function of the augmented system: larger sets are
 #: evaluated in blocks (CasADi's evaluation of a map holds about 2.5 KB per column).
@@ -454,13 +515,25 @@ class _Tracer:
 
     def correct(self, up: np.ndarray, t: np.ndarray, anchor: np.ndarray | None = None,
                 iters: int = 10) -> tuple[np.ndarray | None, int]:
-        """Newton on [G; t.(u - anchor)] = 0 from the prediction up."""
+        """Newton on [G; t.(u - anchor)] = 0 from the prediction up: the first
+        :data:`CORRECTOR_STEPS` steps in one call (:meth:`_Functions.corrector`), the rest
+        here."""
         a = up if anchor is None else anchor
-        u = up.copy()
         m = self.sys.n_rows
+        w = self._w
+        if w is None:
+            self.GJ(up)
+            w = self._w
+        u, done, failed, k0, J = self.sys.correct(up, a, t, w[up.shape[0]:], self.scl,
+                                                  self.tol, 4 * self.hmax)
+        if failed:
+            return None, CORRECTOR_STEPS
+        if done:
+            self.last_J = J
+            return u, k0
         M = np.empty((m + 1, u.shape[0]))
         F = np.empty(m + 1)
-        for k in range(iters):
+        for k in range(CORRECTOR_STEPS, iters):
             g, J = self.GJ(u)
             F[:m] = g
             F[m] = t @ (u - a)
