@@ -179,6 +179,25 @@ class _FreeTest:
         names = list(mech.active_names)
         self.lim = [(names.index(k), float(v[0]), float(v[1]))
                     for k, v in dict(limits or {}).items()]
+        self._maps: dict[int, Any] = {}
+
+    def aux(self, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """det A (N,) and diag B (N, na) at the rows of V: the system's Function mapped over
+        power-of-two blocks through call buffers, the maps built once (by DM calls: 0.3 ms
+        a call, a tenth of a 3-RPR's 3-D aspects)."""
+        from ..model.compiled import FastFn
+
+        N, nv = V.shape
+        n = 1 << max(0, (N - 1).bit_length())
+        fm = self._maps.get(n)
+        if fm is None:
+            f = self.sys.fn.aux
+            fm = self._maps[n] = FastFn(f.map(f"aux_{n}", "serial", n, [1], []),
+                                        fixed=[self.model.p])
+        A = np.empty((n, nv))
+        A[:N], A[N:] = V, V[:1]  # padding: a real point, no NaN
+        d, b = fm(A.ravel())
+        return d[:N].copy(), b.reshape(n, self.model.na)[:N].copy()
 
     def vertical(self, P: np.ndarray, a: float, b: float, sign: int, mode: tuple[int, ...],
                  n: int = 24) -> np.ndarray:
@@ -199,8 +218,8 @@ class _FreeTest:
             idx = np.flatnonzero(ok)
             if not len(idx):
                 continue
-            d, B = self.sys.aux_many(V[idx].T)
-            good = (np.sign(d) == sign) & np.all(np.sign(B.T).astype(int) == want, axis=1)
+            d, B = self.aux(V[idx])
+            good = (np.sign(d) == sign) & np.all(np.sign(B).astype(int) == want, axis=1)
             free[idx[good]] = True
         return free.reshape(k, len(ph)).all(axis=1)
 

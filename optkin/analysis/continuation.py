@@ -206,9 +206,10 @@ class _System:
         self.n_rows = self.fn.n_rows
         self.nz = self.fn.nz
         self.geo = model.p
-        # a call buffer: ~1 us per evaluation instead of ~60 us through the Python wrapper
-        self._fast = FastFn(self.fn.GJw, fixed=(model.p,))
-        self._corr = FastFn(self.fn.corrector(), fixed=(model.p,))
+        # call buffers (~1 us per evaluation instead of ~60 us through the Python wrapper),
+        # made on first use: systems made only for det A and diag B need neither
+        self._fast_fn: FastFn | None = None
+        self._corr_fn: FastFn | None = None
         self._lock = threading.Lock()
 
     def G(self, z: np.ndarray, pfix: np.ndarray, lim: float) -> np.ndarray:
@@ -218,6 +219,18 @@ class _System:
         """G at the rows of U (N, nz): (n_rows, N)."""
         return _in_blocks(self.fn, self.fn.G, -(10**9), U.T, [1, 2, 3],
                           (pfix, lim, self.geo))[0]
+
+    @property
+    def _fast(self) -> FastFn:
+        if self._fast_fn is None:
+            self._fast_fn = FastFn(self.fn.GJw, fixed=(self.geo,))
+        return self._fast_fn
+
+    @property
+    def _corr(self) -> FastFn:
+        if self._corr_fn is None:
+            self._corr_fn = FastFn(self.fn.corrector(), fixed=(self.geo,))
+        return self._corr_fn
 
     def gjw(self, w: np.ndarray) -> np.ndarray:
         """[G; vec(dG/dz)] at w = [z; fixed; lim] (through the buffer; thread-safe)."""
