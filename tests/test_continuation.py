@@ -534,3 +534,21 @@ def tr_points(mech, P, phi):
     from optkin.model.charts import planar_chart
 
     return planar_chart(get_model(mech)).full_points(np.array([[P[0], P[1], phi]]))
+
+
+def test_faces_of_overlapping_copies_of_a_curve():
+    """Sixty copies of one closed curve (a circle of radius 2 sampled at 40 shifted points,
+    noise 1e-5) in a box: every chord crosses two of every other copy, an arrangement that
+    took hours for a traced curve gone round 290 times. The copies are dropped first: the
+    faces are those of one copy: the 40-gon (its shoelace area) and the box less it."""
+    from optkin.analysis.planar import faces, ring_area
+
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    copies = [(2 * np.c_[np.cos(t + s), np.sin(t + s)] + rng.normal(0, 1e-5, (40, 2)), True)
+              for s in rng.uniform(0, 2 * np.pi / 40, 60)]
+    box = (np.array([[-3, -3], [3, -3], [3, 3], [-3, 3]], float), True)
+    out = sorted(f.area for f in faces(copies + [box], snap=1.0))
+    disc = ring_area(copies[0][0])
+    assert len(out) == 2
+    assert np.allclose(out, sorted([disc, 36 - disc]), atol=1e-3)

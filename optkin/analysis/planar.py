@@ -244,6 +244,7 @@ def faces(lines: list[tuple[np.ndarray, bool]], snap: float, dedupe: float = 0.0
     lo, hi = np.minimum(A, B), np.maximum(A, B)
     chunk = max(1, 4_000_000 // max(n, 1))
     eps = 1e-12
+    n_hits = 0
     for s0 in range(0, n, chunk):
         s1 = min(n, s0 + chunk)
         ov = ((lo[s0:s1, None, 0] <= hi[None, :, 0]) & (hi[s0:s1, None, 0] >= lo[None, :, 0])
@@ -261,9 +262,17 @@ def faces(lines: list[tuple[np.ndarray, bool]], snap: float, dedupe: float = 0.0
             t = (w[:, 0] * db[:, 1] - w[:, 1] * db[:, 0]) / den
             u = (w[:, 0] * da[:, 1] - w[:, 1] * da[:, 0]) / den
         hit = (np.abs(den) > 1e-300) & (t >= -eps) & (t <= 1 + eps) & (u >= -eps) & (u <= 1 + eps)
-        for i, j, tt, uu in zip(ii[hit], jj[hit], t[hit], u[hit]):
-            splits[i].append(float(np.clip(tt, 0, 1)))
-            splits[j].append(float(np.clip(uu, 0, 1)))
+        n_hits += int(hit.sum())
+        if dedupe == 0.0 and n_hits > 20 * n:
+            # overlapping copies of curves (every segment crossing dozens of others): an
+            # arrangement of them takes hours; drop the copies first (a segment within 5 %
+            # of the longest chord, snap / 3, of an earlier curve: beyond the sagitta of a
+            # chord turning 0.25 rad, 3 %)
+            return faces(lines, snap, dedupe=0.05 * snap / 3.0)
+        for i, j, tt, uu in zip(ii[hit].tolist(), jj[hit].tolist(),
+                                np.clip(t[hit], 0, 1).tolist(), np.clip(u[hit], 0, 1).tolist()):
+            splits[i].append(tt)
+            splits[j].append(uu)
     # vertices and edges: plain segments in bulk, split ones one by one
     plain = np.array([len(sp) == 2 for sp in splits])
     ip = np.flatnonzero(plain)
