@@ -171,10 +171,15 @@ class _Functions:
                 ok = ca.norm_2(du) <= cap  # false for inf and NaN too
                 fail = ca.logic_or(fail, ca.logic_and(go, ca.logic_not(ok)))
                 u = ca.if_else(ca.logic_and(go, ok), u + du, u)
+            # the tangent continuing t at the converged point: [J; t] x = e_n, normalised
+            e = ca.DM.zeros(nz, 1)
+            e[-1] = 1.0
+            x = ca.solve(ca.vertcat(Jd, t.T), e)
             self._corrector = ca.Function(
-                "corrector", [u0, a, t, rest, scl, tol, cap, p], [u, done, fail, kk, Jd],
+                "corrector", [u0, a, t, rest, scl, tol, cap, p],
+                [u, done, fail, kk, Jd, x / ca.norm_2(x)],
                 ["u", "a", "t", "rest", "scl", "tol", "cap", "p"],
-                ["u_out", "done", "failed", "k", "J"])
+                ["u_out", "done", "failed", "k", "J", "tangent"])
         return self._corrector
 
     def mapped(self, key: int, build: Any) -> Any:
@@ -240,16 +245,17 @@ class _System:
 
     def correct(self, up, a, t, rest, scl, tol, cap):
         """The corrector's first steps (:meth:`_Functions.corrector`): (u, done, failed,
-        k, J), copies (thread-safe)."""
+        k, J, tangent), copies (thread-safe)."""
         with self._lock:
             r = self._corr(up, a, t, rest, scl, tol, cap)
             ok = self._corr.ok()
             u, done, failed, k = r[0].copy(), bool(r[1][0]), bool(r[2][0]), int(r[3][0])
             # J (m, nz), dense: stored by columns
             J = r[4].reshape(self.nz, self.n_rows).T.copy() if done else None
+            tn = r[5].copy() if done else None
         if not ok or not np.all(np.isfinite(u)):
-            return u, False, True, 0, None
-        return u, done, failed, k, J
+            return u, False, True, 0, None, None
+        return u, done, failed, k, J, tn
 
     def aux_one(self, v: np.ndarray) -> tuple[float, np.ndarray]:
         d, b = self.fn.aux(v, self.geo)
@@ -537,12 +543,15 @@ class _Tracer:
         if w is None:
             self.GJ(up)
             w = self._w
-        u, done, failed, k0, J = self.sys.correct(up, a, t, w[up.shape[0]:], self.scl,
-                                                  self.tol, 4 * self.hmax)
+        u, done, failed, k0, J, tn = self.sys.correct(up, a, t, w[up.shape[0]:], self.scl,
+                                                      self.tol, 4 * self.hmax)
+        self.last_tangent = None
         if failed:
             return None, CORRECTOR_STEPS
         if done:
             self.last_J = J
+            if np.all(np.isfinite(tn)):  # else the caller solves for it (or uses the SVD)
+                self.last_tangent = tn
             return u, k0
         M = np.empty((m + 1, u.shape[0]))
         F = np.empty(m + 1)
@@ -620,16 +629,18 @@ class _Tracer:
                     return pts, self._stall_kind(u)
                 continue
             Jn = self.last_J
-            try:  # the tangent continuing t: [Jn; t] x = e_n (no SVD)
-                M = np.vstack([Jn, t])
-                e = np.zeros(len(t))
-                e[-1] = 1.0
-                tn = np.linalg.solve(M, e)
-                tn /= np.linalg.norm(tn)
-            except np.linalg.LinAlgError:
-                tn = self.tangent(Jn)
-                if tn @ t < 0:
-                    tn = -tn
+            tn = self.last_tangent  # from the corrector's call when it converged there
+            if tn is None:
+                try:  # the tangent continuing t: [Jn; t] x = e_n (no SVD)
+                    M = np.vstack([Jn, t])
+                    e = np.zeros(len(t))
+                    e[-1] = 1.0
+                    tn = np.linalg.solve(M, e)
+                    tn /= np.linalg.norm(tn)
+                except np.linalg.LinAlgError:
+                    tn = self.tangent(Jn)
+                    if tn @ t < 0:
+                        tn = -tn
             step = np.linalg.norm(un - u)
             if tn @ t < np.cos(0.25) or step > 2 * h:
                 h *= 0.5
