@@ -22,11 +22,11 @@ box and a representative configuration come from its faces.
 
 Measured on the cuspidal 3-RPR of Zein, Wenger and Chablat with strokes [10, 30]
 (tests/test_aspects3d.py): 2 aspects of volumes 2097.5 and 2069.7 (length^2 rad) from
-36 even sections and 52 added, 10-11 s here; the same with 144 sections at step 0.08
+36 even sections and 52 added, 7-9 s here; the same with 144 sections at step 0.08
 (50 s): 2097.0 and 2068.7; voxel grids of the sign of det A find the same two
 components, 2097.7 and 2069.5 at 240^3 (4 s), 2096.6 and 2068.2 at 320^3 (11 s), 2097.4
 and 2068.7 at 400^3 (23 s). The method is exact in x and y but not in phi, and slow
-(0.12 s per section, mostly the continuation of every section's curves): the exact
+(0.09 s per section, mostly the continuation of every section's curves): the exact
 topology-changing orientations and a faster section are the next steps (see the issue
 tracker). An aspect whose whole extent in phi is shorter than ``min_gap`` may be
 missed, and a neck thinner than it in phi may join or split aspects. Legs with several
