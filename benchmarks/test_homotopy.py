@@ -27,12 +27,15 @@ from optkin.solvers import homotopy as H
 
 
 def _compiled(mech) -> None:
-    """Wait for the topology's tracker library (built in the background on first use, the
-    interpreted tracker running meanwhile): the figures are the compiled tracker's."""
+    """Wait for the topology's tracker and system libraries (built in the background on
+    first use, the interpreted Functions running meanwhile): the figures are the compiled
+    code's (the system switches at its next evaluation)."""
     tr = H._tracker(get_model(mech))
     if tr is not None and tr._pending is not None:
         tr._pending.wait()
         tr._poll()
+    if tr is not None and tr.sys._pending is not None:
+        tr.sys._pending.wait()
 
 
 def _start_time(mech) -> float:
