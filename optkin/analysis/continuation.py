@@ -617,7 +617,11 @@ class _Tracer:
         h = self.hmax * 0.25
         arc = 0.0
         budget = self.budget
-        tans = [t0]  # the tangent at each point (the check for a loop not through u0)
+        # the points and tangents so far, in arrays grown by doubling (the check for a
+        # loop not through u0 reads them every few steps)
+        P_all = np.empty((64, len(u0)))
+        T_all = np.empty((64, len(u0)))
+        P_all[0], T_all[0] = u0, t0
         for k_step in range(self.max_steps):
             if budget.exhausted():
                 return pts, budget.reason
@@ -657,7 +661,11 @@ class _Tracer:
                     pts.append(ub)
                 return pts, "boundary"
             pts.append(un)
-            tans.append(tn)
+            k_pt = len(pts) - 1
+            if k_pt >= len(P_all):
+                P_all = np.concatenate([P_all, np.empty_like(P_all)])
+                T_all = np.concatenate([T_all, np.empty_like(T_all)])
+            P_all[k_pt], T_all[k_pt] = un, tn
             budget.points += 1
             arc += step
             # closure
@@ -668,11 +676,11 @@ class _Tracer:
             # traced with step 0.25 went round one 290 times, and the faces of that
             # arrangement took hours); a point passed again in the same direction (not a
             # crossing of the curve with itself) ends the run
-            if k_step % 4 == 3 and len(pts) > 12:
-                D = np.asarray(pts[1:-10]) - un
+            if k_step % 4 == 3 and k_pt > 11:
+                D = P_all[1:k_pt - 9] - un
                 D[:, self.per] = _wrap(D[:, self.per])
                 near = np.einsum("ij,ij->i", D, D) < (0.6 * max(h, step)) ** 2
-                if near.any() and np.any(np.asarray(tans[1:-10])[near] @ tn > np.cos(0.25)):
+                if near.any() and np.any(T_all[1:k_pt - 9][near] @ tn > np.cos(0.25)):
                     return pts, "jumped"
             if stop_at_bps and arc > 2 * h:
                 for ib, b in enumerate(self.bps):
