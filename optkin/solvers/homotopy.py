@@ -84,6 +84,46 @@ def _squared(e: ca.SX) -> ca.SX:
     return e
 
 
+class _LateCompiled:
+    """A Function compiled in the background (:func:`optkin.model.compiled.start_library`):
+    until its library lands the interpreted Function answers; its maps (through call
+    buffers, one per width) are rebuilt once when the compiled code takes over."""
+
+    def __init__(self, tag: str, f: ca.Function) -> None:
+        from ..model import compiled as cc
+
+        self.f = f
+        self.pending: Any = None
+        self._maps: dict[int, Any] = {}
+        lib = cc.start_library(tag, [f])
+        if isinstance(lib, dict):
+            self.f = lib[f.name()]
+        elif lib is not None:
+            self.pending = lib
+        #: whether a compiler is (or will be) behind it (False: none available)
+        self.compiled = lib is not None
+
+    def poll(self) -> None:
+        """Switch to the compiled Function once its build has finished."""
+        if self.pending is not None:
+            done = self.pending.poll()
+            if done is not None:
+                self.pending = None
+                if done is not False:
+                    self.f = done[self.f.name()]
+                    self._maps = {}
+
+    def mapped(self, N: int, make: Any) -> Any:
+        """The call buffer of ``make(f, N)`` (a map of the current Function over N)."""
+        from ..model.compiled import FastFn
+
+        self.poll()
+        fm = self._maps.get(N)
+        if fm is None:
+            fm = self._maps[N] = FastFn(make(self.f, N))
+        return fm
+
+
 class _Base:
     """A square system H(x; theta) made complex and compiled: its value, x-Jacobian and
     derivative along a direction of theta, evaluated over rows by :meth:`eval` (the
@@ -102,28 +142,25 @@ class _Base:
         # complexified op by op in Python (a 6-6 platform's 0.06 s): kept in the cache
         from ..model import complexify as cx
 
-        self.f = self.f_sx = cc.memo_function(
+        self.f_sx = cc.memo_function(
             "homotopy_cx", [f.serialize(), _source_digest(cx.__file__)], lambda: complexify(f))
         self.key = tag
         # compiled in the background (a 6-6 platform's library takes gcc about a second,
         # a 3-RPR's 0.3 s): meanwhile the interpreted Function answers, with the same
         # numbers (no linear solve inside, nothing it could raise on that the compiled
         # code would not), so that a topology's first call does not wait for the compiler
-        self._maps: dict[int, ca.Function] = {}
-        self._pending: Any = None
-        lib = cc.start_library(f"homotopy:{tag}", [self.f])
-        if isinstance(lib, dict):
-            self.f = lib[self.f.name()]
-        elif lib is not None:
-            self._pending = lib
+        self._fn = _LateCompiled(f"homotopy:{tag}", self.f_sx)
         #: whether a compiler is (or will be) behind the system (False: none available)
-        self.compiled = lib is not None
+        self.compiled = self._fn.compiled
         self.scale = np.asarray(scale, dtype=float)
+
+    @property
+    def _pending(self) -> Any:
+        """The system's library being built (None once it has landed or failed)."""
+        return self._fn.pending
 
     def eval(self, X: np.ndarray, TH: np.ndarray, DTH: np.ndarray):
         """H (N, n), Jx (N, n, n), Ht (N, n) at the N rows of X, TH, DTH (complex)."""
-        from ..model.compiled import FastFn
-
         N0 = X.shape[0]
         N = max(8, 1 << (N0 - 1).bit_length())  # a few widths: padded with the first row
         if N != N0:
@@ -131,16 +168,8 @@ class _Base:
             X = np.concatenate([X, np.repeat(X[:1], pad, 0)])
             TH = np.concatenate([TH, np.repeat(TH[:1], pad, 0)])
             DTH = np.concatenate([DTH, np.repeat(DTH[:1], pad, 0)])
-        if self._pending is not None:  # switch to the compiled code once it has landed
-            done = self._pending.poll()
-            if done is not None:
-                self._pending = None
-                if done is not False:
-                    self.f = done[self.f.name()]
-                    self._maps = {}
-        fm = self._maps.get(N)
-        if fm is None:  # through preallocated buffers: no numpy -> DM conversions
-            fm = self._maps[N] = FastFn(self.f.map(N))
+        # through preallocated buffers: no numpy -> DM conversions
+        fm = self._fn.mapped(N, lambda f, N: f.map(N))
         # an (N, k) C-ordered array is the column-major (k, N) input
         Hr, Hi, Jr, Ji, Tr, Ti = fm(X.real.ravel(), X.imag.ravel(), TH.real.ravel(),
                                     TH.imag.ravel(), DTH.real.ravel(), DTH.imag.ravel())
@@ -478,7 +507,7 @@ class _Tracker:
 
         # built op by op in Python (a 3-RPR's SX step 0.13 s, a 6-6 platform's 0.03 s):
         # kept serialized in the cache, read back in a few ms by the next process
-        self.chunk = cc.memo_function("homotopy_chunk", [
+        chunk = cc.memo_function("homotopy_chunk", [
             sys.f_sx.serialize(), repr((h0, hmax, hmin, big, accept_tol, grow, sx, newton,
                                          predictor, CHUNK)), _source_digest()], build)
 
@@ -490,35 +519,22 @@ class _Tracker:
         # compiled code does not (CasADi's QR solver raises on an exactly singular matrix,
         # the compiled one gives inf or NaN, which the step's guards handle): such a call
         # waits for the library and is made again from the same state (:meth:`run`)
-        self._maps: dict[int, Any] = {}
-        self._pending: Any = None
-        lib = cc.start_library(f"homotopy_track:{sys.key}:{predictor}", [self.chunk])
-        if isinstance(lib, dict):
-            self.chunk = lib[self.chunk.name()]
-        elif lib is not None:
-            self._pending = lib
+        self._chunk = _LateCompiled(f"homotopy_track:{sys.key}:{predictor}", chunk)
         #: whether a compiler is (or will be) behind the chunk (False: none available)
-        self.compiled = lib is not None
+        self.compiled = self._chunk.compiled
+
+    @property
+    def _pending(self) -> Any:
+        """The chunk's library being built (None once it has landed or failed)."""
+        return self._chunk.pending
 
     def _poll(self) -> None:
         """Switch to the compiled chunk once its background build has finished."""
-        done = self._pending.poll()
-        if done is not None:
-            self._pending = None
-            if done is not False:
-                self.chunk = done[self.chunk.name()]
-                self._maps = {}
+        self._chunk.poll()
 
     def _map(self, N: int):
-        from ..model.compiled import FastFn
-
-        if self._pending is not None:
-            self._poll()
-        fm = self._maps.get(N)
-        if fm is None:
-            fm = self._maps[N] = FastFn(self.chunk.map(f"homotopy_chunk_{N}", "serial", N,
-                                                       [1], []))
-        return fm
+        return self._chunk.mapped(N, lambda f, N: f.map(f"homotopy_chunk_{N}", "serial", N,
+                                                        [1], []))
 
     def run(self, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray, gamma: complex,
             max_steps: int = 5000, deadline: Any = None, scale: np.ndarray | None = None):
