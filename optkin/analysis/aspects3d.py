@@ -225,8 +225,8 @@ class _FreeTest:
 
     def label(self, V: np.ndarray) -> tuple[tuple[int, ...], int]:
         """The working mode and the sign of det A of a configuration V = (q_a, x)."""
-        d, B = self.sys.aux_many(np.asarray(V, dtype=float)[:, None])
-        return tuple(int(v) for v in np.sign(B[:, 0])), int(np.sign(d[0]))
+        d, B = self.aux(np.asarray(V, dtype=float)[None])
+        return tuple(int(v) for v in np.sign(B[0])), int(np.sign(d[0]))
 
 
 @dataclass

@@ -477,6 +477,7 @@ class _Tracer:
         self.budget = budget if budget is not None else _Budget()
         self.pfix = pvals
         self.lim = lim
+        self.rest = np.concatenate([pvals, [lim]])  # w = [z; fixed; lim]: its fixed part
         self._w: np.ndarray | None = None
         self.free = np.array(sys.free_idx)
         self.per = sys.periodic[self.free]
@@ -499,7 +500,7 @@ class _Tracer:
     def GJ(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         w = self._w
         if w is None:  # [z; fixed; lim]: the fixed part written once
-            w = self._w = np.concatenate([u * self.scl, self.pfix, [self.lim]])
+            w = self._w = np.concatenate([u * self.scl, self.rest])
         else:
             np.multiply(u, self.scl, out=w[:u.shape[0]])
         out = self.sys.gjw(w)
@@ -539,11 +540,7 @@ class _Tracer:
         here."""
         a = up if anchor is None else anchor
         m = self.sys.n_rows
-        w = self._w
-        if w is None:
-            self.GJ(up)
-            w = self._w
-        u, done, failed, k0, J, tn = self.sys.correct(up, a, t, w[up.shape[0]:], self.scl,
+        u, done, failed, k0, J, tn = self.sys.correct(up, a, t, self.rest, self.scl,
                                                       self.tol, 4 * self.hmax)
         self.last_tangent = None
         if failed:
