@@ -244,7 +244,6 @@ def test_python_m_optkin_and_quiet_progress_when_not_a_tty(small: Path, tmp_path
 
 
 def test_show_draws_a_png(tmp_path: Path) -> None:
-    pytest.importorskip("optkin.plot")
     png = tmp_path / "five.png"
     assert main(["show", str(PROBLEMS / "five_bar.toml"), "--out", str(png)]) == 0
     assert png.read_bytes()[:4] == b"\x89PNG"
@@ -320,7 +319,7 @@ def test_jobs_2_gives_the_same_results_as_jobs_1(small: Path, tmp_path: Path) ->
 
 
 def test_dask_local_cluster_gives_the_same_results(small: Path, tmp_path: Path) -> None:
-    distributed = pytest.importorskip("distributed")
+    import distributed  # the test extra installs it (dask[distributed])
     assert main(["run", str(small), "--out", str(tmp_path / "serial"), "--no-pictures"]) == 0
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
                                   dashboard_address=None) as cluster:
@@ -332,7 +331,6 @@ def test_dask_local_cluster_gives_the_same_results(small: Path, tmp_path: Path) 
 
 @pytest.mark.slow  # waits for the connection timeout
 def test_dask_unreachable_scheduler_is_a_user_error(small: Path, tmp_path: Path, capsys) -> None:
-    pytest.importorskip("distributed")
     code = main(["run", str(small / "rpr3.toml"), "--out", str(tmp_path / "o"),
                  "--scheduler", "tcp://127.0.0.1:9"])
     assert code == 2

@@ -8,13 +8,10 @@ pose; an elbow lies at its link length from the base (written here, not read fro
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 import optkin
 from optkin.mechanism.legs import prismatic_screw, revolute_screw
 from optkin.plot import chain_points, draw
-
-pytest.importorskip("matplotlib")
 
 
 def _frame(R, p):

@@ -492,7 +492,6 @@ def test_scheduler_that_is_not_dask_is_a_quick_user_error(banner, tmp_path: Path
                                                           monkeypatch) -> None:
     """B14: a service that sends a banner (a 2.8 EiB frame length) or keeps the connection
     open without answering gives exit 2 with one line, within the connect timeout."""
-    pytest.importorskip("distributed")
     from optkin.problems import dask_client
 
     monkeypatch.setattr(dask_client, "DASK_CONNECT_TIMEOUT", 2.0)

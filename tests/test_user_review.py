@@ -299,7 +299,6 @@ guess = {{ theta2 = -2.3, phi = -2.5, theta4 = -1.1 }}
 
 
 def test_show_skips_a_first_task_the_library_rejects(tmp_path, capsys):
-    pytest.importorskip("matplotlib")
     text = (PROBLEMS / "rpr3.toml").read_text()
     i = text.index("[[task]]")
     j = text.index("[[task]]", i + 1)
@@ -431,7 +430,6 @@ def test_aspects_and_workspace_reject_bad_arguments(fn, kw, match):
 
 
 def test_show_into_a_directory_or_without_suffix_reports_the_file_written(tmp_path, capsys):
-    pytest.importorskip("matplotlib")
     d = tmp_path / "pics"
     d.mkdir()
     assert main(["show", str(PROBLEMS / "four_bar.toml"), "--out", str(d)]) == 0
@@ -551,7 +549,6 @@ def test_jacobians_and_static_model_to_dict_are_strict_json_far_from_closure(rpr
 def test_show_says_when_it_draws_the_home_configuration_instead_of_a_task(tmp_path, capsys):
     """The five-bar's base joints are 9 apart; at q_a = (pi, 0) the elbows C = (-8, 0) and
     D = (17, 0) are 25 > L2 + L3 = 10 apart: the task cannot close."""
-    pytest.importorskip("matplotlib")
     f = tmp_path / "unreachable.toml"
     f.write_text('schema_version = 1\nname = "x"\n[mechanism]\ntype = "library"\n'
                  'name = "five_bar"\nargs = { L0 = 9, L1 = 8, L2 = 5, L3 = 5, L4 = 8 }\n'

@@ -60,8 +60,6 @@ def test_workers_do_not_inherit_dasks_malloc_trim(monkeypatch):
     ("optkin.cli", ("numpy", "casadi", "pydantic", "scipy")),
 ])
 def test_worker_machinery_imports_no_heavy_module(module, heavy):
-    if "dask" in module:
-        pytest.importorskip("distributed", reason="Dask is the optional extra optkin[dask]")
     code = (f"import sys, {module}; print(sorted(m for m in {heavy!r} if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
@@ -93,7 +91,6 @@ def test_a_stopped_idle_worker_is_replaced_within_the_ack_limit(monkeypatch):
 
 
 def test_dask_preload_hook_starts_one_worker_per_thread(monkeypatch):
-    pytest.importorskip("distributed", reason="Dask is the optional extra optkin[dask]")
     from types import SimpleNamespace
 
     from optkin.problems import dask_worker
