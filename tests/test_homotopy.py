@@ -434,3 +434,26 @@ def test_auto_keeps_the_homotopy_when_only_complex_endpoints_are_singular():
     for r in ms:
         d = [np.max(np.abs(s.x - r.x)) for s in auto]
         assert min(d) < 1e-7
+
+
+@pytest.mark.parametrize("n,k", [(5, 1), (7, 2)])
+def test_complex_elimination_against_numpy(n, k):
+    """The tracker's written-out complex solve (H._clu: equilibrated, partial pivoting)
+    against numpy.linalg.solve: random complex systems, some whose leading block is zero
+    (no solve without row exchanges) or whose rows differ in size by 1e6, and the column
+    scale D applied as x = D u with (J D) u = b."""
+    rng = np.random.default_rng(3)
+    f = H._clu(n, k)
+    for trial in range(12):
+        J = rng.normal(size=(n, n)) + 1j * rng.normal(size=(n, n))
+        if trial % 3 == 1:
+            J[:2, :2] = 0  # the first pivots must come from lower rows
+        if trial % 3 == 2:
+            J[0] *= 1e6
+            J[-1] *= 1e-6
+        B = rng.normal(size=(n, k)) + 1j * rng.normal(size=(n, k))
+        D = rng.uniform(1, 5, n)
+        Xr, Xi = f(J.real, J.imag, B.real, B.imag, D)
+        X = np.array(Xr) + 1j * np.array(Xi)
+        ref = np.linalg.solve(J, B)
+        assert np.max(np.abs(X - ref)) <= 1e-9 * (1 + np.max(np.abs(ref))), trial
