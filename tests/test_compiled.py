@@ -125,6 +125,26 @@ def test_second_model_loads_from_cache(cache):
     assert m2.compiled
 
 
+def test_new_geometries_do_not_digest_the_core_again(tmp_path, monkeypatch):
+    """In the auto mode every new geometry's Model looks for the topology's compiled core;
+    its cache key (a digest of the serialized Functions) is computed once per topology, not
+    once per geometry; and a core compiled later is still found by the next Model."""
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))  # an empty cache: nothing to load
+    monkeypatch.setenv("OPTKIN_COMPILE", "auto")
+    optkin.model.clear_cache()  # the topology anew (its key not yet computed)
+    calls = []
+    real = cc._digest
+    monkeypatch.setattr(cc, "_digest", lambda tag, fs: calls.append(tag) or real(tag, fs))
+    rng = np.random.default_rng(5)
+    models = [Model(lib.rpr3(BASE3, np.asarray(PLAT3) + rng.uniform(-0.02, 0.02, (3, 2))))
+              for _ in range(6)]
+    assert sum(t.startswith("core:") for t in calls) == 1
+    assert not any(m.compiled for m in models)
+    if cc.find_compiler() is not None:
+        assert models[0].compile()
+        assert Model(lib.rpr3(BASE3, np.asarray(PLAT3) + 0.01)).compiled
+
+
 @needs_cc
 def test_compiled_tracker_matches_interpreted(cache, monkeypatch):
     mech = rpr()

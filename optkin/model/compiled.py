@@ -606,12 +606,15 @@ def _release(lib: Path, *pids: int) -> None:
 
 
 def libraries(
-    requests: Sequence[tuple[str, Sequence[ca.Function]]], build: bool = True
+    requests: Sequence[tuple[str, Sequence[ca.Function]] | tuple[str, Sequence[ca.Function], str]],
+    build: bool = True
 ) -> list[dict[str, ca.Function] | None]:
     """:func:`library` for several libraries; the missing ones are compiled in parallel
     (one builder process each; the C code is generated in this thread). A cached library
     whose record does not vouch for it is rebuilt like a missing one; one that another
-    process is building is waited for."""
+    process is building is waited for. A request may carry its key (:func:`_digest` of its
+    tag and Functions) when the caller keeps it: the digest serializes every Function (a
+    3-RPR's core: 3.5 ms), which a caller asking again and again should pay once."""
     out: list[dict[str, ca.Function] | None] = [None] * len(requests)
     if compile_mode() == "off" or not requests:
         return out
@@ -620,8 +623,9 @@ def libraries(
         log.debug("optkin: no usable cache directory; using interpreted Functions")
         return out
     todo = []
-    for k, (tag, funcs) in enumerate(requests):
-        key = _digest(tag, funcs)
+    for k, req in enumerate(requests):
+        tag, funcs = req[0], req[1]
+        key = req[2] if len(req) > 2 else _digest(tag, funcs)  # type: ignore[misc]
         path = _library_path(d, tag, key)
         out[k] = _load(path, tag, key, funcs)
         if out[k] is None:

@@ -202,6 +202,7 @@ class Topology:
         self._store: dict[Hashable, Any] = {}
         self._lock = threading.RLock()
         self._compile_failed = False
+        self._core_key: str | None = None
 
     # -------------------------------------------------------------- per-topology store
     def cached(self, key: Hashable, build: Callable[[], Any]) -> Any:
@@ -232,10 +233,14 @@ class Topology:
         """Load (or build) the compiled twins of the core Functions and of ``extra``
         libraries; returns the extra libraries (None where compiling is unavailable)."""
         with self._lock:
-            reqs: list[tuple[str, list[ca.Function]]] = []
+            reqs: list[tuple] = []
             want_core = not self.compiled and not (self._compile_failed and build)
             if want_core:
-                reqs.append(("core:" + self.key, self.core_functions()))
+                # the key once per topology: each new geometry's Model asks again (in the
+                # "auto" mode, a load that finds nothing until the core is compiled)
+                if self._core_key is None:
+                    self._core_key = cc._digest("core:" + self.key, self.core_functions())
+                reqs.append(("core:" + self.key, self.core_functions(), self._core_key))
             reqs += list(extra)
             libs = cc.libraries(reqs, build=build) if reqs else []
             if want_core:
