@@ -144,7 +144,7 @@ CASES = [
     ("workspace-grid", 64 * MiB, FIVE_BAR, "optkin.workspace(m, qa_grid=2)",
      "r = optkin.workspace(m, grid={n}, qa_grid=2); assert r.success; r.to_dict()",
      "grid", lambda n: n + 1),
-    ("draw-panels", 16 * MiB, TRACKED, "draw(m, R[:2], os.path.join(D, 'a.png'))",
+    ("draw-panels", 32 * MiB, TRACKED, "draw(m, R[:2], os.path.join(D, 'a.png'))",
      "draw(m, R[:{n}], os.path.join(D, 'b.png'))",
      "len(results)", lambda n: n + 1),
 ]

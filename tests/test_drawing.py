@@ -62,8 +62,17 @@ def test_draw_3upu_from_leg_types(tmp_path):
                        - abs(r.q[5 * k + 2])) < 1e-9
         rs.append(r)
     png = tmp_path / "upu3.png"
-    assert draw(m, rs, str(png)) == str(png)
+    fig = draw(m, rs, str(png))
     assert png.stat().st_size > 5000
+    # spatial panels: 3-D axes, labelled, equal ranges in x, y and z (a cube), the ranges
+    # holding every joint of both configurations
+    assert len(fig.axes) == 2 and all(a.name == "3d" for a in fig.axes)
+    pts = np.vstack([np.vstack(chain_points(m, r)) for r in rs])
+    for a in fig.axes:
+        assert (a.get_xlabel(), a.get_ylabel(), a.get_zlabel()) == ("x", "y", "z")
+        lims = np.array([a.get_xlim(), a.get_ylim(), a.get_zlim()])
+        assert np.allclose(np.diff(lims, axis=1), np.diff(lims, axis=1)[0])
+        assert np.all(lims[:, 0] <= pts.min(axis=0)) and np.all(lims[:, 1] >= pts.max(axis=0))
 
 
 def test_draw_legs_from_screws(tmp_path):
@@ -106,3 +115,112 @@ def test_draw_legs_from_screws(tmp_path):
     png2 = tmp_path / "rpr3.png"
     draw(m2, r2, str(png2))
     assert png2.stat().st_size > 5000
+
+
+def _rpr3_modes():
+    m = optkin.mechanisms.rpr3([[0, 0], [10, 0], [5, 8.66]], [[-2, -1.15], [2, -1.15],
+                                                            [0, 2.31]])
+    return m, list(optkin.assembly_modes(m, [7.0, 6.5, 6.0]))
+
+
+def test_draw_returns_a_figure_and_writes_only_when_asked(tmp_path):
+    """No path: a Figure and no file; a path: the file at the asked resolution, and no
+    pyplot figure left open (a batch of pictures must not accumulate them)."""
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    m, modes = _rpr3_modes()
+    assert len(modes) >= 2
+    before = set(plt.get_fignums())
+    png = tmp_path / "modes.png"
+    fig = draw(m, modes[:2], png, dpi=150)
+    assert set(plt.get_fignums()) == before  # kept out of pyplot
+    w, h = Image.open(png).size
+    fw, fh = fig.get_size_inches()
+    assert (w, h) == (round(fw * 150), round(fh * 150))
+    assert list(tmp_path.iterdir()) == [png]
+    fig2 = draw(m, modes[0])  # interactive: a pyplot figure, nothing written
+    assert fig2.number in plt.get_fignums() and list(tmp_path.iterdir()) == [png]
+    plt.close(fig2)
+    # a panel: labelled equal axes, a legend naming legs, platform and fixed joints, the
+    # platform polygon closed and its three vertices the platform points of the pose
+    a = fig.axes[0]
+    assert (a.get_xlabel(), a.get_ylabel()) == ("x", "y") and a.get_aspect() == 1.0
+    labels = fig.legends[0].get_texts()
+    assert [t.get_text() for t in labels] == ["legs", "platform", "base", "fixed joints"]
+    plat = chain_points(m, modes[0])[3]
+    assert np.allclose(plat[0], plat[-1]) and len(plat) == 4
+
+
+def test_draw_into_the_callers_axes(tmp_path):
+    """ax=: every configuration overlaid in the given Axes, one legend entry each; the
+    wrong kind of Axes is refused with a message naming the fix."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    m, modes = _rpr3_modes()
+    fig, ax = plt.subplots()
+    try:
+        out = draw(m, modes, ax=ax, title="assembly modes")
+        assert out is fig and ax.get_title() == "assembly modes"
+        texts = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert texts == [f"#{i + 1}" for i in range(len(modes))]
+        assert list(tmp_path.iterdir()) == []
+    finally:
+        plt.close(fig)
+    fig3 = plt.figure()
+    try:
+        ax3 = fig3.add_subplot(projection="3d")
+        try:
+            draw(m, modes[0], ax=ax3)
+        except optkin.MechanismError as e:
+            assert "projection='3d'" in str(e) and "planar" in str(e)
+        else:
+            raise AssertionError("3-D Axes accepted for a planar mechanism")
+    finally:
+        plt.close(fig3)
+
+
+def _crossings(poly2d):
+    """Pairs of non-adjacent edges of a closed polygon (k+1, 2) that cross (written here:
+    the signs of the orientation determinants)."""
+    def orient(a, b, c):
+        return np.sign((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+
+    E = [(poly2d[i], poly2d[i + 1]) for i in range(len(poly2d) - 1)]
+    out = 0
+    for i in range(len(E)):
+        for j in range(i + 2, len(E)):
+            if i == 0 and j == len(E) - 1:
+                continue  # adjacent through the closing vertex
+            (p, q), (r, s) = E[i], E[j]
+            if orient(p, q, r) * orient(p, q, s) < 0 and orient(r, s, p) * orient(r, s, q) < 0:
+                out += 1
+    return out
+
+
+def test_stewart_platform_polygon_is_simple():
+    """A 6-6 platform whose legs are numbered out of angular order: in leg order its
+    hexagon crosses itself; drawn, the platform's polygon (in the platform's plane) does
+    not, and it still visits every platform point once."""
+    ang_b = np.deg2rad([0, 180, 60, 240, 120, 300])  # leg order jumps across the circle
+    ang_p = ang_b + np.deg2rad(20)
+    A = np.c_[np.cos(ang_b), np.sin(ang_b), np.zeros(6)]
+    B = 0.5 * np.c_[np.cos(ang_p), np.sin(ang_p), np.zeros(6)]
+    m = optkin.mechanisms.stewart_gough(A, B)
+    p = np.array([0.05, -0.02, 1.0])
+    L = np.linalg.norm(p + B - A, axis=1)
+    r = optkin.forward(m, L, guess=np.r_[p, 1.0, 0, 0, 0])
+    assert r.success
+    leg_order = np.vstack([B, B[:1]])[:, :2]
+    assert _crossings(leg_order) > 0  # the trap is real
+    poly = chain_points(m, r)[6]
+    R, t = np.asarray(r.pose)[:3, :3], np.asarray(r.pose)[:3, 3]
+    local = (poly - t) @ R  # back into the platform frame (its plane z = 0)
+    assert np.allclose(local[:, 2], 0, atol=1e-9)
+    assert _crossings(local[:, :2]) == 0
+    assert np.allclose(local[0], local[-1])
+    got = {tuple(np.round(v, 9)) for v in local[:-1, :2]}
+    assert got == {tuple(np.round(v, 9)) for v in B[:, :2]}

@@ -39,7 +39,8 @@ class Drawing:
     legs : list of ndarray
         One polyline per leg, from its base (the first joint) to its platform point.
     platform : ndarray or None
-        The platform polygon through the legs' platform points, closed (more than two legs).
+        The platform polygon through the legs' platform points, closed (more than two legs),
+        in geometric order (by angle about the centroid in their plane).
     links : list of ndarray
         Khalil tables: one segment per frame, from its antecedent's origin.
     base : ndarray (k, 3)
@@ -95,9 +96,23 @@ def drawing(model: Any, q: np.ndarray, pose: np.ndarray | None = None) -> Drawin
         P = [T[:3, :3] @ bp + T[:3, 3] for bp in platform_points(mech)]
     else:  # where the legs' chains end
         P = [ln[-1] for ln in legs]
-    platform = np.array(P + [P[0]]) if len(P) > 2 else None
+    platform = _polygon(np.array(P)) if len(P) > 2 else None
     return Drawing(legs=legs, platform=platform, links=[], base=np.array(base),
                    dim=int(model.platform.space_dim))
+
+
+def _polygon(P: np.ndarray) -> np.ndarray:
+    """The closed polygon through the points P (k, 3) in geometric order: by angle about
+    their centroid in their best-fitting plane, starting at the first point (in leg order
+    the six joints of a 6-6 platform draw a self-intersecting hexagon). Points that are
+    (nearly) collinear or coincide keep the leg order."""
+    C = P - P.mean(axis=0)
+    _, sv, Vt = np.linalg.svd(C)
+    if len(P) > 3 and sv[1] > 1e-9 * max(sv[0], 1e-300):
+        ang = np.arctan2(C @ Vt[1], C @ Vt[0])
+        order = np.argsort((ang - ang[0]) % (2 * np.pi), kind="stable")
+        P = P[order]
+    return np.vstack([P, P[:1]])
 
 
 def platform_points(mech: Any) -> list[np.ndarray]:
