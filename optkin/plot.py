@@ -24,7 +24,7 @@ _COST_PANEL, _COST_RASTER = 1.0e6, 1.25e6
 def _panel_cost(dpi: float) -> float:
     return _COST_PANEL + _COST_RASTER * (float(dpi) / 100.0) ** 2
 
-__all__ = ["draw", "chain_points", "DPI"]
+__all__ = ["draw", "animate", "chain_points", "DPI"]
 
 
 #: Resolution of the PNG files :func:`draw` writes (dots per inch).
@@ -191,6 +191,162 @@ def draw(
         except OSError as e:
             raise MechanismError(f"path: cannot write {path!r}: {e.strerror or e}") from None
     return fig
+
+
+def animate(
+    mech: Mechanism,
+    motion: Any,
+    path: str | os.PathLike[str] | None = None,
+    *,
+    frames: int | None = None,
+    fps: float = 15,
+    dpi: float = 100,
+    title: str | None = None,
+) -> Any:
+    """The mechanism moving through ``motion``: a matplotlib ``FuncAnimation``, written to
+    ``path`` when given (``.gif`` with pillow, ``.mp4`` with ffmpeg when installed).
+
+    Parameters
+    ----------
+    mech : Mechanism
+    motion : sequence of KinResult, or BatchResult
+        The configurations in order: :func:`optkin.track`'s result, a list of
+        :class:`~optkin.results.KinResult`, or :func:`optkin.forward_batch`'s result.
+        Configurations that did not succeed are left out (the title counts them).
+    path : str or PathLike, optional
+        Where to write the animation; without it nothing is written (in a notebook,
+        ``IPython.display.HTML(anim.to_jshtml())`` shows it).
+    frames : int, optional
+        At most this many frames, evenly spaced along the motion (default: every
+        configuration, up to 200).
+    fps : float
+        Frames per second of the written file.
+    dpi : float
+        Resolution of the written file.
+    title : str, optional
+        Printed above the frame counter (default: the mechanism's name).
+
+    The axes hold the whole motion (equal scales; 3-D for spatial mechanisms); the path of
+    the platform's origin is drawn as it goes (for mechanisms with a platform).
+    """
+    from matplotlib.animation import FuncAnimation
+
+    from .solvers.common import check_mechanism, check_result_of
+
+    check_mechanism(mech, "animate")
+    if path is not None:
+        if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
+            raise MechanismError(f"path: expected a file name (str or os.PathLike) or None, "
+                                 f"got {type(path).__name__}")
+        suffix = os.path.splitext(os.fspath(path))[1].lower()
+        if suffix not in (".gif", ".mp4"):
+            raise MechanismError(f"path: expected a .gif or .mp4 file name, got "
+                                 f"{os.fspath(path)!r}; give the animation one of those suffixes")
+    if hasattr(motion, "result") and hasattr(motion, "qa") and hasattr(motion, "success"):
+        ok = np.flatnonzero(np.asarray(motion.success, dtype=bool))
+        rs: list[Any] = [motion.result(int(i)) for i in ok]
+        n_all = len(motion.success)
+    elif isinstance(motion, KinResult):
+        rs, n_all = [motion], 1
+    elif isinstance(motion, (str, bytes)) or not hasattr(motion, "__iter__"):
+        raise MechanismError("motion: expected a sequence of KinResult (optkin.track) or a "
+                             f"BatchResult (optkin.forward_batch), got {type(motion).__name__}")
+    else:
+        rs = list(motion)
+        n_all = len(rs)
+        if not all(isinstance(r, KinResult) for r in rs):
+            raise MechanismError(
+                "motion: expected a sequence of KinResult (optkin.track) or a BatchResult "
+                "(optkin.forward_batch); found another object in the sequence")
+        for r in rs:
+            check_result_of(mech, r, "motion")
+        rs = [r for r in rs if r.success and np.all(np.isfinite(r.q))]
+    if frames is not None:
+        if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 1:
+            raise MechanismError(f"frames: expected a positive integer, got {frames!r}")
+    for name, v, lo, hi in (("fps", fps, 0.1, 240), ("dpi", dpi, 10, 2000)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
+            raise MechanismError(f"{name}: expected a number in [{lo}, {hi}], got {v!r}")
+    if title is not None and not isinstance(title, str):
+        raise MechanismError(f"title: expected a string, got {type(title).__name__}")
+    if not rs:
+        raise MechanismError("motion: no configuration succeeded; nothing to animate")
+    k = min(len(rs), 200 if frames is None else int(frames))
+    check_size("animate", "frames", k, _panel_cost(dpi), lo=1, unit="one frame")
+    checkpoint()  # validation stops here: every argument is checked
+    idx = np.unique(np.linspace(0, len(rs) - 1, k).round().astype(int))
+    draws = [_drawing(mech, rs[i]) for i in idx]
+    spatial = draws[0].dim == 3
+    lims = _common_limits(draws, 3 if spatial else 2)
+    fig = _figure(path, (5.4, 5.0))
+    ax = fig.add_subplot(projection="3d" if spatial else None)
+    _frame_axes(ax, spatial, lims)
+    B = draws[0].base
+    if len(B):
+        if spatial:
+            ax.scatter(B[:, 0], B[:, 1], B[:, 2], marker="^", c="k", s=36, label="fixed joints")
+        else:
+            ax.scatter(B[:, 0], B[:, 1], marker="^", c="k", s=36, zorder=3,
+                       label="fixed joints")
+
+    def new_line(**kw):
+        if spatial:
+            return ax.plot([], [], [], **kw)[0]
+        return ax.plot([], [], **kw)[0]
+
+    d0 = draws[0]
+    legs = [new_line(color="C0", lw=2, marker="o", ms=3.5, label="legs" if j == 0 else None)
+            for j in range(len(d0.legs))]
+    plat = new_line(color="C1", lw=2.2, label="platform") if d0.platform is not None else None
+    links = [new_line(color="C2", lw=2, marker="o", ms=3.5, label="links" if j == 0 else None)
+             for j in range(len(d0.links))]
+    poses = [rs[i].pose for i in idx]
+    has_trail = all(P is not None for P in poses) and d0.platform is not None
+    trail = (new_line(color="0.5", lw=1, ls=":", label="platform origin")
+             if has_trail else None)
+    origins = np.array([np.asarray(P)[:3, 3] for P in poses]) if has_trail else None
+    ax.legend(loc="upper right", fontsize=7)
+    head = title or mech.name
+    text = ax.set_title("")
+
+    def put(line, P):
+        line.set_data(P[:, 0], P[:, 1])
+        if spatial:
+            line.set_3d_properties(P[:, 2])
+
+    def update(f):
+        d = draws[f]
+        for ln, P in zip(legs, d.legs):
+            put(ln, P)
+        if plat is not None and d.platform is not None:
+            put(plat, d.platform)
+        for ln, P in zip(links, d.links):
+            put(ln, P)
+        if trail is not None:
+            put(trail, origins[:f + 1])
+        text.set_text(f"{head}: {idx[f] + 1} / {len(rs)}"
+                      + (f" ({n_all - len(rs)} left out)" if n_all > len(rs) else ""))
+        return [*legs, *links, *([plat] if plat is not None else []),
+                *([trail] if trail is not None else []), text]
+
+    update(0)
+    anim = FuncAnimation(fig, update, frames=len(draws), interval=1000.0 / fps, blit=False)
+    if path is not None:
+        from matplotlib import animation
+
+        out = os.fspath(path)
+        if out.lower().endswith(".mp4"):
+            if not animation.writers.is_available("ffmpeg"):
+                raise MechanismError(f"path: writing {out!r} needs ffmpeg, which is not "
+                                     "installed; write a .gif instead (pillow)")
+            writer: Any = animation.FFMpegWriter(fps=fps)
+        else:
+            writer = animation.PillowWriter(fps=fps)
+        try:
+            anim.save(out, writer=writer, dpi=dpi)
+        except OSError as e:
+            raise MechanismError(f"path: cannot write {out!r}: {e.strerror or e}") from None
+    return anim
 
 
 def _label(i: int, r: KinResult) -> str:

@@ -8,6 +8,7 @@ pose; an elbow lies at its link length from the base (written here, not read fro
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import optkin
 from optkin.mechanism.legs import prismatic_screw, revolute_screw
@@ -224,3 +225,56 @@ def test_stewart_platform_polygon_is_simple():
     assert np.allclose(local[0], local[-1])
     got = {tuple(np.round(v, 9)) for v in local[:-1, :2]}
     assert got == {tuple(np.round(v, 9)) for v in B[:, :2]}
+
+
+def test_animate_a_tracked_motion(tmp_path):
+    """A 3-RPR tracked along a path of leg lengths: a GIF of the asked number of frames at
+    the asked size, whose frames differ (the mechanism moves); the platform origin's trail
+    ends at the last pose; a wrong suffix is refused naming the fix, and nothing is
+    written without a path."""
+    from PIL import Image, ImageChops
+
+    from optkin.plot import animate
+
+    m = optkin.mechanisms.rpr3([[0, 0], [1, 0], [0.5, 0.9]],
+                               [[-0.2, -0.1], [0.25, -0.2], [0.05, 0.25]])
+    r = optkin.forward(m, optkin.inverse(m, [0.45, 0.35, 0.1])[0].qa, guess=[0.4, 0.3, 0.0])
+    motion = optkin.track(m, np.linspace(r.qa, r.qa * [1.2, 0.9, 1.1], 40), guess=r)
+    assert all(s.success for s in motion)
+    gif = tmp_path / "motion.gif"
+    anim = animate(m, motion, gif, frames=8, dpi=50)
+    im = Image.open(gif)
+    assert im.n_frames == 8 and im.size == (round(5.4 * 50), round(5.0 * 50))
+    first = im.convert("RGB")
+    im.seek(7)
+    assert ImageChops.difference(first, im.convert("RGB")).getbbox() is not None
+    trail = [ln for ln in anim._fig.axes[0].lines if ln.get_label() == "platform origin"][0]
+    x, y = trail.get_data()
+    assert np.allclose([x[-1], y[-1]], np.asarray(motion[-1].pose)[:2, 3])
+    with pytest.raises(optkin.MechanismError, match=r"\.gif or \.mp4"):
+        animate(m, motion, tmp_path / "motion.png")
+    import matplotlib.pyplot as plt
+
+    shown = animate(m, motion, frames=3)  # for a notebook: nothing written
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["motion.gif"]
+    shown._draw_was_started = True  # (not shown here: no warning at its deletion)
+    plt.close(shown._fig)
+
+
+def test_animate_a_spatial_batch(tmp_path):
+    """A 6-6 platform lifted along z by forward_batch: a 3-D animation of its rows."""
+    from PIL import Image
+
+    from optkin.plot import animate
+
+    ang = np.deg2rad([0, 60, 120, 180, 240, 300])
+    A = np.c_[np.cos(ang - 0.2), np.sin(ang - 0.2), np.zeros(6)]
+    B = 0.5 * np.c_[np.cos(ang + 0.3), np.sin(ang + 0.3), np.zeros(6)]
+    m = optkin.mechanisms.stewart_gough(A, B)
+    Z = np.linspace(0.9, 1.2, 6)
+    QA = np.array([np.linalg.norm([0, 0, z] + B - A, axis=1) for z in Z])
+    batch = optkin.forward_batch(m, QA, guess=np.r_[0, 0, 0.9, 1.0, 0, 0, 0])
+    assert np.all(batch.success)
+    gif = tmp_path / "lift.gif"
+    anim = animate(m, batch, gif, dpi=40)
+    assert Image.open(gif).n_frames == 6 and anim._fig.axes[0].name == "3d"
