@@ -190,9 +190,26 @@ def test_workspace_with_joint_limits(five_bar):
 
 
 def test_pictures(tmp_path, asp, five_bar):
+    import matplotlib.pyplot as plt
+
+    before = set(plt.get_fignums())
     p = tmp_path / "aspects.png"
-    asp.plot(str(p))
+    fig = asp.plot(str(p))
     assert p.stat().st_size > 10000
+    assert set(plt.get_fignums()) == before  # a figure for a file stays out of pyplot
+    # every workspace panel names its aspects (with det A's sign and the area) and the
+    # parallel singularity in a legend; the joint-space axes are named for people
+    for j, mode in enumerate(asp.working_modes):
+        texts = [t.get_text() for t in fig.axes[j].get_legend().get_texts()]
+        for k, a in enumerate(asp.of_mode(mode)):
+            assert texts[k].startswith(f"aspect {k + 1} (det A {'+' if a.det_sign > 0 else '-'})")
+            assert f"area {a.area:.3g}" in texts[k]
+        assert "parallel singularity" in texts
+    assert fig.axes[len(asp.working_modes)].get_xlabel() == "theta1 of leg 1 (rad)"
+    # the joint-space masks rasterized: the vector file stays small (77 MB before)
+    svg = tmp_path / "aspects.svg"
+    asp.plot(str(svg))
+    assert svg.stat().st_size < 3e6
     d = asp.to_dict()
     assert d["n_working_modes"] == 4 and d["count"] == len(asp.aspects)
 

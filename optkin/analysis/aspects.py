@@ -730,33 +730,55 @@ def _failed_status(curves: SingularCurves) -> str:
 
 
 # ---------------------------------------------------------------------------------------
-# pictures (matplotlib, Agg)
+# pictures (matplotlib)
 # ---------------------------------------------------------------------------------------
 
 
-def _fig(nr, nc, w=4.0, h=4.0):
-    import matplotlib
+def _figure(path, figsize, layout=None):
+    """A new Figure: out of pyplot when it goes to a file (nothing to close; no backend
+    switched under the caller, e.g. a notebook's), a pyplot figure otherwise."""
+    if path is not None:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
 
-    matplotlib.use("Agg", force=False)
+        fig = Figure(figsize=figsize, layout=layout)
+        FigureCanvasAgg(fig)
+        return fig
     import matplotlib.pyplot as plt
 
-    fig, axs = plt.subplots(nr, nc, figsize=(w * nc, h * nr), squeeze=False,
-                            constrained_layout=True)
-    return fig, axs
+    return plt.figure(figsize=figsize, layout=layout)
 
 
-def _axes(ax, figsize, three_d: bool = False):
+def _fig(nr, nc, w=4.0, h=4.0, path=None):
+    fig = _figure(path, (w * nc, h * nr), "constrained")
+    return fig, fig.subplots(nr, nc, squeeze=False)
+
+
+def _axes(ax, figsize, three_d: bool = False, path=None):
     """(figure, axes, whether they are new): ``ax`` itself when given, else a new figure
-    of ``figsize`` with one (3-D) axes."""
+    of ``figsize`` with one (3-D) axes (kept out of pyplot when it goes to ``path``)."""
     if ax is not None:
         return ax.figure, ax, False
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    fig = plt.figure(figsize=figsize)
+    fig = _figure(path, figsize)
     return fig, fig.add_subplot(projection="3d" if three_d else None), True
+
+
+def _mode_str(mode: tuple[int, ...]) -> str:
+    """A working mode as the signs of its legs' B_kk, e.g. (+, -)."""
+    return "(" + ", ".join("+" if m > 0 else "-" for m in mode) + ")"
+
+
+def _joint_label(name: str) -> str:
+    """A joint's axis label for people: ``L1.theta1`` -> "theta1 of leg 1 (rad)"; lengths
+    (rho, d, r) without a unit (the mechanism's own); other names as they are."""
+    import re
+
+    m = re.fullmatch(r"L(\d+)\.([A-Za-z]+)(\d*)", name)
+    if m is None:
+        return name
+    leg, kind, k = m.groups()
+    unit = " (rad)" if kind in ("theta", "th", "q", "phi", "alpha") else ""
+    return f"{kind}{k} of leg {leg}{unit}"
 
 
 def _face_patch(f: Face, **kw):
@@ -771,11 +793,14 @@ def _face_patch(f: Face, **kw):
 
 
 def _save(fig, path):
+    """Write ``fig`` to ``path`` (when given) at :data:`optkin.plot.DPI`; returns it."""
     if path is not None:
-        fig.savefig(path, dpi=90, bbox_inches="tight")
+        from ..plot import DPI
+
+        fig.savefig(path, dpi=DPI, bbox_inches="tight")
         import matplotlib.pyplot as plt
 
-        plt.close(fig)
+        plt.close(fig)  # (a no-op for the figures _figure keeps out of pyplot)
     return fig
 
 
@@ -786,7 +811,7 @@ _COLORS = {"parallel": "tab:red", "serial": "tab:blue", "limit": "tab:green",
 def _plot_curves(res: SingularCurves, path=None, ax=None, title=None):
     fig = None
     if ax is None:
-        fig, axs = _fig(1, 1, 6, 6)
+        fig, axs = _fig(1, 1, 6, 6, path)
         ax = axs[0, 0]
     for c in res.curves:
         col = _COLORS.get(c.kind.split(":")[0], "k")
@@ -822,23 +847,31 @@ def _plot_aspects(res: Aspects, path=None, title=None):
 
     modes = res.working_modes
     rows = 2 if res.qa_grid is not None else 1
-    fig, axs = _fig(rows, len(modes), 3.6, 3.6)
+    fig, axs = _fig(rows, len(modes), 3.6, 3.6, path)
     cmap = plt.get_cmap("tab10")
     for j, mode in enumerate(modes):
         ax = axs[0, j]
         for k, a in enumerate(res.of_mode(mode)):
             ax.add_patch(_face_patch(a.face, facecolor=cmap(k % 10), alpha=0.55,
-                                     edgecolor="k", lw=0.6))
+                                     edgecolor="k", lw=0.6,
+                                     label=f"aspect {k + 1} (det A {'+' if a.det_sign > 0 else '-'}"
+                                           f"): area {a.area:.3g}"))
             ax.plot(*a.x[:2], "k.", ms=3)
+        first = True
         for c in res.curves.curves:
             if c.kind.startswith("parallel"):
                 sel = np.all(np.sign(c.B) == np.array(mode), axis=1)
                 P = np.where(sel[:, None], c.points, np.nan)
-                ax.plot(P[:, 0], P[:, 1], color="tab:red", lw=0.8)
+                ax.plot(P[:, 0], P[:, 1], color="tab:red", lw=0.8,
+                        label="parallel singularity" if first and sel.any() else None)
+                first = first and not sel.any()
+        if res.of_mode(mode):
+            ax.legend(fontsize=6, loc="best", framealpha=0.8)
         ax.set_xlim(*res.curves.bounds[0])
         ax.set_ylim(*res.curves.bounds[1])
         ax.set_aspect("equal")
-        ax.set_title(f"Mf {mode}: {len(res.of_mode(mode))} aspect(s)", fontsize=8)
+        ax.set_title(f"working mode {_mode_str(mode)}: {len(res.of_mode(mode))} aspect(s)",
+                     fontsize=8)
         ax.set_xlabel(res.plane[0])
         ax.set_ylabel(res.plane[1])
         if rows == 2:
@@ -847,9 +880,9 @@ def _plot_aspects(res: Aspects, path=None, title=None):
             for k, a in enumerate(res.of_mode(mode)):
                 M = np.ma.masked_where(~a.qa_mask.T, np.full(a.qa_mask.T.shape, k % 10))
                 ax2.pcolormesh(g0, g1, M, cmap=cmap, vmin=0, vmax=9.99, alpha=0.6,
-                               shading="nearest")
-            ax2.set_xlabel(res.qa_names[0])
-            ax2.set_ylabel(res.qa_names[1])
+                               shading="nearest", rasterized=True)
+            ax2.set_xlabel(_joint_label(res.qa_names[0]))
+            ax2.set_ylabel(_joint_label(res.qa_names[1]))
             ax2.set_title("serial aspects QA (joint space)", fontsize=8)
     fig.suptitle(title or f"{res.mechanism}: generalized aspects per working mode", fontsize=10)
     return _save(fig, path)
@@ -860,21 +893,23 @@ def _plot_workspace(res: Workspace, path=None, title=None):
 
     modes = res.working_modes
     rows = 2 if res.qa_masks is not None else 1
-    fig, axs = _fig(rows, len(modes) + 1, 3.6, 3.6)
+    fig, axs = _fig(rows, len(modes) + 1, 3.6, 3.6, path)
     cmap = plt.get_cmap("tab10")
     for j, mode in enumerate(modes):
         ax = axs[0, j]
         for f in res.regions[mode]:
             ax.add_patch(_face_patch(f, facecolor=cmap(j % 10), alpha=0.5, edgecolor="k", lw=0.6))
-        ax.set_title(f"Mf {mode}: area {res.areas[mode]:.4g}", fontsize=8)
+        ax.set_title(f"working mode {_mode_str(mode)}: area {res.areas[mode]:.4g}",
+                     fontsize=8)
         if rows == 2:
             ax2 = axs[1, j]
             g0, g1 = res.qa_grid
             M = np.ma.masked_where(~res.qa_masks[mode].T, np.full(res.qa_masks[mode].T.shape, j))
-            ax2.pcolormesh(g0, g1, M, cmap=cmap, vmin=0, vmax=9.99, alpha=0.6, shading="nearest")
-            ax2.set_xlabel(res.qa_names[0])
-            ax2.set_ylabel(res.qa_names[1])
-            ax2.set_title(f"Mf {mode} in the joint space", fontsize=8)
+            ax2.pcolormesh(g0, g1, M, cmap=cmap, vmin=0, vmax=9.99, alpha=0.6, shading="nearest",
+                           rasterized=True)
+            ax2.set_xlabel(_joint_label(res.qa_names[0]))
+            ax2.set_ylabel(_joint_label(res.qa_names[1]))
+            ax2.set_title(f"working mode {_mode_str(mode)} in the joint space", fontsize=8)
     if rows == 2:
         axs[1, -1].axis("off")
     ax = axs[0, -1]

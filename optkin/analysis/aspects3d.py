@@ -127,7 +127,7 @@ class Aspects3D:
         from .aspects import _axes, _check_path, _save
 
         _check_path(path)
-        fig, ax, _ = _axes(None, (7.5, 6.5), three_d=True)
+        fig, ax, _ = _axes(None, (7.5, 6.5), three_d=True, path=path)
         for k, a in enumerate(self.aspects):
             color = f"C{k % 10}"
             label = (f"aspect {k + 1}: det {'+' if a.det_sign > 0 else '-'}, "

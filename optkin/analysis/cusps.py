@@ -112,7 +112,7 @@ class ModeChangePath:
         _check_path(path)
         if not len(self.qa_path):
             raise MechanismError("plot: this ModeChangePath has no path (success=False)")
-        fig, ax, own = _axes(ax, (6, 6))
+        fig, ax, own = _axes(ax, (6, 6), path=path)
         if self.curves is not None:
             self.curves.plot(ax=ax)
         k = [i for i in range(self.qa_path.shape[1]) if self.section.get(i) is None]
@@ -606,7 +606,7 @@ class CuspCurves:
         from .aspects import _axes, _check_path, _save
 
         _check_path(path)
-        fig, ax, own = _axes(ax, (7, 6), three_d=True)
+        fig, ax, own = _axes(ax, (7, 6), three_d=True, path=path)
         for k, c in enumerate(self.curves):
             ax.plot(c[:, 1], c[:, 2], c[:, 0], "-", color="tab:purple", lw=2,
                     label="cusp curves" if k == 0 else None)

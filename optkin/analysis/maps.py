@@ -15,7 +15,7 @@ evaluates, from :func:`optkin.jacobians` (dimensionless matrices, as in
 * ``distance``: min(parallel, serial);
 * ``manipulability``: Yoshikawa's sqrt(det(J J^T)) of the scaled task Jacobian J_a.
 
-:func:`plot_singularity_map` draws the grid (matplotlib, Agg backend) and writes a PNG.
+:func:`plot_singularity_map` draws the grid (matplotlib) and writes a PNG.
 """
 
 from __future__ import annotations
@@ -287,22 +287,19 @@ def plot_singularity_map(
     if unknown:
         raise MechanismError(f"plot_singularity_map: unknown argument(s) {unknown}; known: "
                              f"{list(_KWARGS)} (of singularity_map)")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..plot import DPI
+    from .aspects import _figure
 
     sm = singularity_map(mech, u, v, **kwargs)
     Z = sm.values[measure]
-    fig, axp = plt.subplots(figsize=(6, 5))
+    fig = _figure(path, (6, 5))  # out of pyplot: nothing to close, no backend switched
+    axp = fig.add_subplot()
     try:
         _draw_map(fig, axp, sm, Z, measure, log, mech.name)
-        fig.savefig(path, dpi=100)
+        fig.savefig(path, dpi=DPI)
     except OSError as e:
         raise MechanismError(f"path: cannot write the PNG {os.fspath(path)!r}: "
                              f"{e.strerror or e}") from None
-    finally:
-        plt.close(fig)
     sm.path = str(path)
     return sm
 

@@ -96,7 +96,7 @@ class SingularSurface:
         from .aspects import _axes, _check_path, _save
 
         _check_path(path)
-        fig, ax, own = _axes(ax, (7.5, 6.5), three_d=True)
+        fig, ax, own = _axes(ax, (7.5, 6.5), three_d=True, path=path)
         V, T = self.vertices, self.triangles
         if len(T):
             kw = {"color": color} if color is not None else {"cmap": "viridis"}

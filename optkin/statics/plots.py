@@ -1,4 +1,4 @@
-"""Pictures of the statics analyses (PNG files through matplotlib's Agg backend)."""
+"""Pictures of the statics analyses (PNG files; the figures stay out of pyplot)."""
 
 from __future__ import annotations
 
@@ -14,13 +14,19 @@ from .results import CapabilityResult, WorkspaceResult
 __all__ = ["plot_capability", "plot_workspace"]
 
 
-def _plt():
-    import matplotlib
+def _subplots(figsize: tuple[float, float]):
+    """(figure, axes) drawn for a file: out of pyplot (no backend switched under the
+    caller, nothing left open)."""
+    from ..analysis.aspects import _figure
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    fig = _figure("file", figsize)
+    return fig, fig.add_subplot()
 
-    return plt
+
+def _dpi() -> int:
+    from ..plot import DPI
+
+    return DPI
 
 
 def _check(res: object, cls: type, path: object, made_by: str) -> None:
@@ -52,14 +58,13 @@ def plot_capability(
             or plane[0] == plane[1]):
         raise StaticsError(f"plane: expected two different components of {names}, got "
                            f"{show(plane)}", path=("plane",))
-    plt = _plt()
     i, j = names.index(plane[0]), names.index(plane[1])
     other = [k for k in range(len(names)) if k not in (i, j)]
     D = res.directions
     inplane = np.all(np.abs(D[:, other]) < 1e-12, axis=1) if other else np.ones(len(D), bool)
     ang = np.arctan2(D[:, j], D[:, i])
     order = [k for k in np.argsort(ang) if inplane[k]]
-    fig, ax = plt.subplots(figsize=(5.2, 5.0))
+    fig, ax = _subplots((5.2, 5.0))
     fin = [k for k in order if np.isfinite(res.max[k])]
     if fin:
         pts = np.array([[res.points[k, i], res.points[k, j]] for k in fin])
@@ -85,8 +90,7 @@ def plot_capability(
     ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title or f"capability polygon ({res.status}, cond {res.cond:.3g})", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    fig.savefig(path, dpi=_dpi())
     return str(path)
 
 
@@ -99,8 +103,7 @@ def plot_workspace(
     grey: unreachable; black crosses: singular (the set is not resisted).
     """
     _check(res, WorkspaceResult, path, "wrench_feasible_workspace")
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(6.0, 5.0))
+    fig, ax = _subplots((6.0, 5.0))
     P, M = res.poses, res.margin.copy()
     M[np.isneginf(M)] = np.nan
     lim = np.nanmax(np.abs(M)) if np.any(np.isfinite(M)) else 1.0
@@ -132,6 +135,5 @@ def plot_workspace(
     ax.set_title(title or f"wrench-feasible workspace: {res.fraction:.0%} of reachable poses",
                  fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    fig.savefig(path, dpi=_dpi())
     return str(path)
