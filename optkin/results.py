@@ -159,6 +159,11 @@ class KinResult:
         None unless certification was asked for (``assembly_modes(..., certify=True)``,
         :func:`optkin.certify`); then True when Krawczyk's test proved that a box around
         ``x`` holds exactly one real solution.
+    task : dict
+        The pose as the mechanism's task coordinates, by name (``mech.task``): x, y, phi
+        for a planar platform; x, y, z, roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll),
+        scipy's ``Rotation.from_euler("ZYX", [yaw, pitch, roll])``) for a spatial one, whose
+        ``x`` holds a quaternion instead; the named components for a Khalil table.
     """
 
     q: np.ndarray
@@ -178,6 +183,21 @@ class KinResult:
     cond: float = float("nan")
     joint_names: tuple[str, ...] = ()
     certified: bool | None = None
+    #: the names of the task coordinates and the kind of task space (see :attr:`task`)
+    task_names: tuple[str, ...] = ()
+    task_space: str = ""
+
+    @property
+    def task(self) -> dict[str, float]:
+        """The pose as task coordinates by name (NaN where the pose is unknown)."""
+        if not self.task_names:
+            return {}
+        if not np.all(np.isfinite(self.pose)):
+            return {n: float("nan") for n in self.task_names}
+        from .mechanism.tasks import task_values
+
+        v = task_values(self.task_space, self.task_names, self.pose)
+        return {n: float(x) for n, x in zip(self.task_names, v)}
 
     @property
     def solve_time(self) -> float:
@@ -212,6 +232,7 @@ class KinResult:
                 "x": self.x,
                 "pose": self.pose,
                 "joint_names": list(self.joint_names),
+                "task": self.task,
                 "posture": self.posture,
                 "working_mode": self.working_mode,
                 "cond": self.cond,

@@ -184,3 +184,34 @@ def test_unreachable_pose_gives_empty_set():
     sols = optkin.inverse(m, [0.5, 5.0])
     assert len(sols) == 0
     assert "cannot reach" in sols.info["message"]
+
+
+def test_results_carry_their_task_coordinates_by_name():
+    """KinResult.task: the six numbers a user gives a spatial platform (not the quaternion
+    in x), with roll, pitch, yaw checked against scipy's Rotation (Rz(yaw) Ry(pitch)
+    Rx(roll) is from_euler("ZYX", [yaw, pitch, roll])); a planar platform's (x, y, phi)
+    from its legs' forward model; a Khalil table's named components."""
+    from scipy.spatial.transform import Rotation
+
+    sg = M.stewart_gough(SG_BASE, SG_PLAT)
+    t = {"x": 0.05, "y": -0.03, "z": 1.0, "roll": 0.1, "pitch": -0.05, "yaw": 0.2}
+    R = Rotation.from_euler("ZYX", [t["yaw"], t["pitch"], t["roll"]]).as_matrix()
+    p = np.array([t["x"], t["y"], t["z"]])
+    legs = np.linalg.norm(p + SG_PLAT @ R.T - SG_BASE, axis=1)  # the leg equations
+    r = optkin.forward(sg, legs, guess=np.r_[p, 1.0, 0.0, 0.0, 0.0] + 0.01)
+    assert r.success and len(r.x) == 7  # x holds a quaternion
+    assert list(r.task) == ["x", "y", "z", "roll", "pitch", "yaw"]
+    assert np.allclose([r.task[k] for k in t], list(t.values()), atol=1e-9)
+    assert np.allclose(r.pose[:3, :3], R, atol=1e-9)
+    assert r.to_dict()["task"] == r.task
+
+    m = M.rpr3(RPR_BASE, RPR_PLAT)
+    x, y, phi = 0.45, 0.35, 0.1
+    rf = optkin.forward(m, _rho_planar(RPR_BASE, RPR_PLAT, x, y, phi), guess=[0.4, 0.3, 0.0])
+    assert rf.success and list(rf.task) == ["x", "y", "phi"]
+    assert np.allclose(list(rf.task.values()), [x, y, phi], atol=1e-9)
+
+    sr = M.sr400()
+    q = optkin.forward(sr, [0.3, -0.4, 0.2, 0.5, 0.4, 0.6], guess=[np.pi / 2 + 1, -1, np.pi + 1])
+    assert tuple(q.task) == tuple(sr.task)
+    assert np.allclose([q.task["x"], q.task["y"], q.task["z"]], q.pose[:3, 3])

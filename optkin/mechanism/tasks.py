@@ -10,7 +10,7 @@ from .._checks import MAX_ABS, as_matrix, as_vector, show
 from ..errors import MechanismError
 from .geometry import homogeneous, matrix_to_rpy, rot2, rot_x, rot_y, rot_z, rpy_to_matrix
 
-__all__ = ["task_to_pose", "pose_to_task", "as_pose"]
+__all__ = ["task_to_pose", "pose_to_task", "as_pose", "task_space", "task_values"]
 
 
 def task_to_pose(mech: Any, t: Any) -> np.ndarray:
@@ -48,19 +48,30 @@ def task_to_pose(mech: Any, t: Any) -> np.ndarray:
 
 def pose_to_task(mech: Any, T: np.ndarray) -> np.ndarray:
     """Task coordinates of a 4x4 pose (inverse of :func:`task_to_pose`)."""
+    return task_values(task_space(mech), tuple(mech.task), T)
+
+
+def task_space(mech: Any) -> str:
+    """The kind of task coordinates of ``mech``: its platform's ("planar",
+    "planar_point", "spatial", "spatial_translational") or "khalil"."""
+    return str(mech.platform) if mech.kind == "legs" else "khalil"
+
+
+def task_values(space: str, names: tuple[str, ...], T: np.ndarray) -> np.ndarray:
+    """The task coordinates ``names`` of a 4x4 pose in a task space of kind ``space``
+    (:func:`task_space`)."""
     T = np.asarray(T, dtype=float)
-    if mech.kind == "legs":
-        plat = mech.platform
-        if plat == "planar":
-            return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
-        if plat == "planar_point":
-            return T[:2, 3].copy()
-        if plat == "spatial":
-            return np.concatenate([T[:3, 3], matrix_to_rpy(T[:3, :3])])
+    if space == "planar":
+        return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
+    if space == "planar_point":
+        return T[:2, 3].copy()
+    if space == "spatial":
+        return np.concatenate([T[:3, 3], matrix_to_rpy(T[:3, :3])])
+    if space != "khalil":
         return T[:3, 3].copy()
     rpy = matrix_to_rpy(T[:3, :3])
     comp = {"x": T[0, 3], "y": T[1, 3], "z": T[2, 3], "rx": rpy[0], "ry": rpy[1], "rz": rpy[2]}
-    return np.array([comp[c] for c in mech.task])
+    return np.array([comp[c] for c in names])
 
 
 def as_pose(mech: Any, pose: Any) -> np.ndarray:

@@ -384,6 +384,18 @@ class Model:
         return self.topology.st
 
     @property
+    def task_names(self) -> tuple[str, ...]:
+        """The names of the mechanism's task coordinates (``mech.task``)."""
+        return tuple(self.mech.task)
+
+    @property
+    def task_space(self) -> str:
+        """The kind of task coordinates (:func:`optkin.mechanism.tasks.task_space`)."""
+        from ..mechanism.tasks import task_space
+
+        return task_space(self.mech)
+
+    @property
     def platform(self):
         """The platform kind class (legs), or None (Khalil tables)."""
         st = self.topology.st

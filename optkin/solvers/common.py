@@ -274,6 +274,8 @@ def make_result(
         working_mode=working_mode,
         cond=cond,
         joint_names=tuple(mech.joint_names),
+        task_names=model.task_names,
+        task_space=model.task_space,
     )
 
 
