@@ -1,6 +1,10 @@
-"""Rotations and poses (numpy only)."""
+"""Rotations and poses: scipy.spatial.transform.Rotation behind optkin's conventions
+(quaternions (w, x, y, z), roll-pitch-yaw as R = Rz(yaw) Ry(pitch) Rx(roll))."""
 
 from __future__ import annotations
+
+import warnings
+from typing import Any
 
 import numpy as np
 
@@ -18,76 +22,65 @@ def wrap_angle(a):
     return w if w.ndim else float(w)
 
 
+def _R(kind: str, *args) -> Any:
+    from scipy.spatial.transform import Rotation
+
+    return getattr(Rotation, kind)(*args)
+
+
 def rot_x(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
+    """The rotation by ``a`` about x."""
+    return _R("from_euler", "x", float(a)).as_matrix()
 
 
 def rot_y(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, 0, s], [0, 1.0, 0], [-s, 0, c]])
+    """The rotation by ``a`` about y."""
+    return _R("from_euler", "y", float(a)).as_matrix()
 
 
 def rot_z(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    """The rotation by ``a`` about z."""
+    return _R("from_euler", "z", float(a)).as_matrix()
 
 
 def rot2(a: float) -> np.ndarray:
+    """The planar rotation by ``a``."""
     c, s = np.cos(a), np.sin(a)
     return np.array([[c, -s], [s, c]])
 
 
 def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    return rot_z(yaw) @ rot_y(pitch) @ rot_x(roll)
+    """R = Rz(yaw) Ry(pitch) Rx(roll): scipy's ``Rotation.from_euler("ZYX", [yaw, pitch,
+    roll])`` (intrinsic z-y'-x'')."""
+    return _R("from_euler", "ZYX", [float(yaw), float(pitch), float(roll)]).as_matrix()
 
 
 def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`rpy_to_matrix` (pitch in [-pi/2, pi/2])."""
-    pitch = np.arcsin(np.clip(-R[2, 0], -1.0, 1.0))
-    roll = np.arctan2(R[2, 1], R[2, 2])
-    yaw = np.arctan2(R[1, 0], R[0, 0])
+    """Inverse of :func:`rpy_to_matrix`: (roll, pitch, yaw), pitch in [-pi/2, pi/2] (at
+    pitch = +-pi/2, where only yaw -+ roll is defined, roll = 0)."""
+    with warnings.catch_warnings():  # the gimbal-lock note: roll = 0 there, as documented
+        warnings.simplefilter("ignore", UserWarning)
+        yaw, pitch, roll = _R("from_matrix", np.asarray(R, dtype=float)).as_euler("ZYX")
     return np.array([roll, pitch, yaw])
 
 
 def euler_xyz(R: np.ndarray) -> np.ndarray:
-    """Angles (a, b, c) with R = Rx(a) Ry(b) Rz(c)."""
-    b = np.arcsin(np.clip(R[0, 2], -1.0, 1.0))
-    a = np.arctan2(-R[1, 2], R[2, 2])
-    c = np.arctan2(-R[0, 1], R[0, 0])
-    return np.array([a, b, c])
+    """Angles (a, b, c) with R = Rx(a) Ry(b) Rz(c) (scipy's intrinsic "XYZ")."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        return _R("from_matrix", np.asarray(R, dtype=float)).as_euler("XYZ")
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation of a quaternion (w, x, y, z); normalised first."""
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    w, x, y, z = np.asarray(q, dtype=float)
+    return _R("from_quat", [x, y, z, w]).as_matrix()
 
 
 def matrix_to_quat(R: np.ndarray) -> np.ndarray:
     """Quaternion (w, x, y, z) with w >= 0 of a rotation matrix."""
-    tr = np.trace(R)
-    if tr > 0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
-    elif R[1, 1] > R[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
-    else:
-        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
+    x, y, z, w = _R("from_matrix", np.asarray(R, dtype=float)).as_quat()
+    q = np.array([w, x, y, z])
     return q if q[0] >= 0 else -q
 
 
