@@ -79,6 +79,10 @@ def build_parser() -> argparse.ArgumentParser:
     v = sub.add_parser("validate", help="check problem files without solving")
     v.add_argument("paths", nargs="+", metavar="PATH", help="problem files or directories")
 
+    j = sub.add_parser("schema", help="print the JSON Schema of problem files (for editors)")
+    j.add_argument("--out", "-o", metavar="FILE", default=None,
+                   help="write it to FILE instead of standard output")
+
     s = sub.add_parser("show", help="draw a problem's mechanism at its first solved configuration")
     s.add_argument("file", metavar="FILE", help="a problem file")
     s.add_argument("--out", "-o", metavar="PNG", default=None,
@@ -194,6 +198,22 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     return EXIT_INVALID if bad else EXIT_OK
 
 
+def _cmd_schema(args: argparse.Namespace) -> int:
+    """The JSON Schema of a problem file (a TOML file read as JSON data): editors such as
+    VS Code (Even Better TOML, ``#:schema`` or ``[[schemas]]``) validate and complete with
+    it."""
+    import json
+
+    from optkin.problems.schema import problem_json_schema
+
+    text = json.dumps(problem_json_schema(), indent=2) + "\n"
+    if args.out is None:
+        sys.stdout.write(text)
+    else:
+        Path(args.out).write_text(text, encoding="utf-8")
+    return EXIT_OK
+
+
 def _cmd_show(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -277,6 +297,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_validate(args)
         if args.command == "show":
             return _cmd_show(args)
+        if args.command == "schema":
+            return _cmd_schema(args)
     except ProblemFileError as e:
         _err(str(e))
         return EXIT_INVALID

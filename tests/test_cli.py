@@ -366,3 +366,30 @@ def test_progress_bar_on_a_terminal(small: Path, tmp_path: Path) -> None:
     # the tqdm bar, drawn at least once (a fast run may end before it redraws at 2/2)
     assert re.search(r"[0-2]/2 \[", text) and "problem" in text, text
     assert "4/4 task(s) passed" in text
+
+
+def test_schema_validates_every_bundled_problem_and_refuses_broken_ones(tmp_path: Path) -> None:
+    """``optkin schema``: a JSON Schema (draft 2020-12) that a standard validator
+    (jsonschema, as editors use) accepts every bundled problem file with, and that refuses
+    an unknown key, a task of no known kind and a mistyped value; ``--out`` writes it."""
+    import jsonschema
+    import tomllib
+
+    p = optkin("schema")
+    assert p.returncode == 0, p.stderr
+    sch = json.loads(p.stdout)
+    jsonschema.Draft202012Validator.check_schema(sch)
+    V = jsonschema.Draft202012Validator(sch)
+    files = sorted((ROOT / "problems").glob("*.toml"))
+    assert len(files) >= 30
+    for f in files:
+        errs = [e.message for e in V.iter_errors(tomllib.loads(f.read_text()))]
+        assert not errs, (f.name, errs[:2])
+    good = tomllib.loads((ROOT / "problems" / "rpr3.toml").read_text())
+    for broken in ({**good, "mechanizm": good["mechanism"]},
+                   {**good, "task": [{"kind": "fly", "qa": [1, 2, 3]}]},
+                   {**good, "schema_version": "one"}):
+        assert list(V.iter_errors(broken)), broken
+    out = tmp_path / "problem.schema.json"
+    assert optkin("schema", "--out", str(out)).returncode == 0
+    assert json.loads(out.read_text()) == sch

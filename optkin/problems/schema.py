@@ -1137,6 +1137,16 @@ def _convert(e: ValidationError, filename: str) -> ProblemFileError:
 # ---------------------------------------------------------------------------
 
 
+def problem_json_schema() -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of a problem file, as data read from TOML: what
+    ``optkin schema`` prints (from the pydantic model :class:`ProblemFile`)."""
+    sch = ProblemFile.model_json_schema()
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema",
+            "$id": "https://optkin.invalid/problem-file.schema.json",
+            **{k: v for k, v in sch.items() if k != "title"},
+            "title": "optkin problem file"}
+
+
 @dataclass(frozen=True)
 class Problem:
     """A validated problem file: its model, the raw document and where it came from."""
