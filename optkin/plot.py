@@ -295,7 +295,7 @@ def animate(
         return ax.plot([], [], **kw)[0]
 
     d0 = draws[0]
-    legs = [new_line(color="C0", lw=2, marker="o", ms=3.5, label="legs" if j == 0 else None)
+    legs = [new_line(color="C0", lw=2, marker="o", ms=3.5, label="leg chains" if j == 0 else None)
             for j in range(len(d0.legs))]
     plat = new_line(color="C1", lw=2.2, label="platform") if d0.platform is not None else None
     links = [new_line(color="C2", lw=2, marker="o", ms=3.5, label="links" if j == 0 else None)
@@ -363,7 +363,7 @@ def _panel(ax: Any, d: Any, spatial: bool, color: str | None, label: str | None,
     """One configuration: legs, platform (closed; shaded in the plane), links, fixed
     joints; the legend's labels on the first configuration only."""
     def lab(text):
-        return (label if label is not None and text == "legs" else
+        return (label if label is not None and text == "leg chains" else
                 text if legend and label is None else None)
 
     def line(P, **kw):
@@ -373,7 +373,7 @@ def _panel(ax: Any, d: Any, spatial: bool, color: str | None, label: str | None,
 
     leg_c = color or "C0"
     for j, P in enumerate(d.legs):
-        line(P, color=leg_c, lw=2, marker="o", ms=3.5, label=lab("legs") if j == 0 else None)
+        line(P, color=leg_c, lw=2, marker="o", ms=3.5, label=lab("leg chains") if j == 0 else None)
     if d.platform is not None:
         P = d.platform
         pc = color or "C1"

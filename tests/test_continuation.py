@@ -512,14 +512,22 @@ def test_one_call_corrector_takes_the_python_newton_steps(rpr):
         t = np.linalg.svd(J)[2][-1]
         up = u0 + 0.1 * t + 0.02 * rng.normal(size=5)
         u, k = tr.correct(up, t)
-        ref, kr = up.copy(), None  # numpy Newton
+        ref, kr = up.copy(), None  # numpy Newton, with the tracer's cap on a step's length
+        cap = 4 * 0.25  # (4 hmax, scaled units: a longer step is refused, the step halved)
         for it in range(10):
             g, Jr = tr.GJ(ref)
             F = np.r_[g, t @ (ref - up)]
             if np.abs(g).max() < 1e-11 and abs(F[-1]) < 1e-10:
                 kr = it
                 break
-            ref = ref + np.linalg.solve(np.vstack([Jr, t]), -F)
+            du = np.linalg.solve(np.vstack([Jr, t]), -F)
+            if np.linalg.norm(du) > cap:
+                kr = "refused"
+                break
+            ref = ref + du
+        if kr == "refused":
+            assert u is None
+            continue
         if kr is None:
             continue
         assert u is not None and k == kr

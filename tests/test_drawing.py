@@ -148,7 +148,7 @@ def test_draw_returns_a_figure_and_writes_only_when_asked(tmp_path):
     a = fig.axes[0]
     assert (a.get_xlabel(), a.get_ylabel()) == ("x", "y") and a.get_aspect() == 1.0
     labels = fig.legends[0].get_texts()
-    assert [t.get_text() for t in labels] == ["legs", "platform", "base", "fixed joints"]
+    assert [t.get_text() for t in labels] == ["leg chains", "platform", "base", "fixed joints"]
     plat = chain_points(m, modes[0])[3]
     assert np.allclose(plat[0], plat[-1]) and len(plat) == 4
 
