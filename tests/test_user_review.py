@@ -595,7 +595,18 @@ def test_statics_plots_check_their_arguments(rpr3, closed, tmp_path):
         statics.plot_capability(cap, 5)
     with pytest.raises(MechanismError, match=r"^path: expected a file name"):
         optkin.singular_curves(M.five_bar(9, 8, 5, 5, 8)).plot(5)
-    assert statics.plot_capability(cap, png) == png
+    import matplotlib.pyplot as plt
+
+    before = set(plt.get_fignums())
+    fig = statics.plot_capability(cap, png)
+    assert Path(png).stat().st_size > 5000 and fig.axes[0].get_xlabel() == "fx"
+    assert set(plt.get_fignums()) == before  # drawn for a file: out of pyplot
+    fig2, ax = plt.subplots()
+    try:  # into the caller's Axes: nothing written
+        assert statics.plot_workspace(ws, ax=ax) is fig2
+        assert statics.plot_capability(cap, ax=ax) is fig2
+    finally:
+        plt.close(fig2)
     import io
 
     buf = io.BytesIO()

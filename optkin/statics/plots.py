@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -14,13 +15,18 @@ from .results import CapabilityResult, WorkspaceResult
 __all__ = ["plot_capability", "plot_workspace"]
 
 
-def _subplots(figsize: tuple[float, float]):
-    """(figure, axes) drawn for a file: out of pyplot (no backend switched under the
-    caller, nothing left open)."""
+def _subplots(figsize: tuple[float, float], path: object, ax: object):
+    """(figure, axes, new): the caller's Axes, else a new figure: out of pyplot when it
+    goes to a file (no backend switched under the caller, nothing left open), a pyplot
+    figure otherwise (``plt.show()``, notebooks)."""
+    if ax is not None:
+        if not hasattr(ax, "plot") or not hasattr(ax, "figure"):
+            raise StaticsError(f"ax: expected a matplotlib Axes, got {type(ax).__name__}")
+        return ax.figure, ax, False
     from ..analysis.aspects import _figure
 
-    fig = _figure("file", figsize)
-    return fig, fig.add_subplot()
+    fig = _figure(path, figsize)
+    return fig, fig.add_subplot(), True
 
 
 def _dpi() -> int:
@@ -33,23 +39,27 @@ def _check(res: object, cls: type, path: object, made_by: str) -> None:
     if not isinstance(res, cls):
         raise StaticsError(f"res: expected a {cls.__name__} (from {made_by}), got "
                            f"{type(res).__name__}")
-    if not (isinstance(path, (str, os.PathLike)) or hasattr(path, "write")):
-        raise StaticsError(f"path: expected a file name (str or os.PathLike) for the PNG, got "
-                           f"{type(path).__name__}")
+    if path is not None and not (isinstance(path, (str, os.PathLike)) or hasattr(path, "write")):
+        raise StaticsError(f"path: expected a file name (str or os.PathLike) for the PNG, a "
+                           f"file object or None, got {type(path).__name__}")
 
 
 def plot_capability(
     res: CapabilityResult,
-    path: str | os.PathLike[str],
+    path: str | os.PathLike[str] | None = None,
     plane: Sequence[str] = ("fx", "fy"),
     title: str | None = None,
     exact: np.ndarray | None = None,
-) -> str:
-    """Draw the capability polygon of ``res`` in the plane of two wrench components.
+    *,
+    ax: Any = None,
+) -> Any:
+    """Draw the capability polygon of ``res`` in the plane of two wrench components;
+    returns the matplotlib Figure, written to ``path`` (a file name or file object) when
+    given, drawn into ``ax`` when given.
 
     Directions whose other components are non-zero are skipped; unresisted directions are
     drawn at the origin in red, unbounded ones as arrows. ``exact`` (k, 2): the exact
-    section of the capability polytope, drawn dashed. Returns the path written.
+    section of the capability polytope, drawn dashed.
     """
     _check(res, CapabilityResult, path, "capability / capability_polygon")
     names = list(res.wrench_names)
@@ -64,7 +74,7 @@ def plot_capability(
     inplane = np.all(np.abs(D[:, other]) < 1e-12, axis=1) if other else np.ones(len(D), bool)
     ang = np.arctan2(D[:, j], D[:, i])
     order = [k for k in np.argsort(ang) if inplane[k]]
-    fig, ax = _subplots((5.2, 5.0))
+    fig, ax, new = _subplots((5.2, 5.0), path, ax)
     fin = [k for k in order if np.isfinite(res.max[k])]
     if fin:
         pts = np.array([[res.points[k, i], res.points[k, j]] for k in fin])
@@ -89,21 +99,25 @@ def plot_capability(
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title or f"capability polygon ({res.status}, cond {res.cond:.3g})", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=_dpi())
-    return str(path)
+    if new:
+        fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=_dpi())
+    return fig
 
 
 def plot_workspace(
-    res: WorkspaceResult, path: str | os.PathLike[str], title: str | None = None
-) -> str:
-    """Map of the wrench-feasibility margin over the grid (or scatter of the poses).
+    res: WorkspaceResult, path: str | os.PathLike[str] | None = None,
+    title: str | None = None, *, ax: Any = None,
+) -> Any:
+    """Map of the wrench-feasibility margin over the grid (or scatter of the poses); returns
+    the matplotlib Figure, written to ``path`` when given, drawn into ``ax`` when given.
 
     Green: feasible (margin >= 0); the 0 contour bounds the wrench-feasible workspace;
     grey: unreachable; black crosses: singular (the set is not resisted).
     """
     _check(res, WorkspaceResult, path, "wrench_feasible_workspace")
-    fig, ax = _subplots((6.0, 5.0))
+    fig, ax, new = _subplots((6.0, 5.0), path, ax)
     P, M = res.poses, res.margin.copy()
     M[np.isneginf(M)] = np.nan
     lim = np.nanmax(np.abs(M)) if np.any(np.isfinite(M)) else 1.0
@@ -134,6 +148,8 @@ def plot_workspace(
         ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title or f"wrench-feasible workspace: {res.fraction:.0%} of reachable poses",
                  fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=_dpi())
-    return str(path)
+    if new:
+        fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=_dpi())
+    return fig
