@@ -285,6 +285,7 @@ def _four_bar_cases(n, seed):
     return n2
 
 
+@pytest.mark.slow
 def test_four_bar_200_random_against_circle_intersection():
     assert _four_bar_cases(200, 3) > 50
 

@@ -356,6 +356,7 @@ def _brute_square(rho, h=0.004):
     return 2 * best
 
 
+@pytest.mark.slow
 def test_le_kang_doan_square_beats_the_published_design():
     """The largest square centred on the symmetry axis with 1/kappa >= 0.5, both elbows
     outward, over rho = l2 / l1 (l1 = 1, l0 = (sqrt 2 / 2)(l2 - l1)). The published optimum
@@ -530,6 +531,7 @@ def sgp_numpy(base, plat, T):
     return 1.0 / np.linalg.norm(H, axis=2).max(axis=1), L
 
 
+@pytest.mark.slow
 def test_stewart_force_capability_optimum_verified_on_a_dense_sample():
     """Choose base and platform radii and spacing angles of a 6-6 platform to maximise the
     least force capability over a box of poses (+-0.1 in x, y, the angles; z in [0.9, 1.1]),
