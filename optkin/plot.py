@@ -21,30 +21,46 @@ from .results import KinResult
 _COST_PANEL, _COST_RASTER = 1.0e6, 1.25e6
 
 
+__all__ = ["draw", "animate", "chain_points", "DPI"]
+
+
 def _panel_cost(dpi: float) -> float:
     return _COST_PANEL + _COST_RASTER * (float(dpi) / 100.0) ** 2
-
-__all__ = ["draw", "animate", "chain_points", "DPI"]
 
 
 #: Resolution of the PNG files :func:`draw` writes (dots per inch).
 DPI = 200
 
 
-def _figure(path: Any, size: tuple[float, float]) -> Any:
-    """A new Figure: kept out of pyplot when it goes to a file (nothing to close, no GUI
-    backend chosen for the caller); a pyplot figure otherwise, so that ``plt.show()`` and
-    notebooks display it."""
+def _figure(path: Any, size: tuple[float, float], layout: str | None = None) -> Any:
+    """A new Figure: kept out of pyplot when it goes to a file (nothing to close, no
+    backend switched under the caller, e.g. a notebook's); a pyplot figure otherwise, so
+    that ``plt.show()`` and notebooks display it. Every picture of optkin starts here."""
     if path is not None:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 
-        fig = Figure(figsize=size)
+        fig = Figure(figsize=size, layout=layout)
         FigureCanvasAgg(fig)
         return fig
     import matplotlib.pyplot as plt
 
-    return plt.figure(figsize=size)
+    return plt.figure(figsize=size, layout=layout)
+
+
+def _line(ax: Any, P: np.ndarray, spatial: bool, **kw: Any) -> Any:
+    """One polyline (k, 3) in 2-D or 3-D Axes."""
+    if spatial:
+        return ax.plot(P[:, 0], P[:, 1], P[:, 2], **kw)[0]
+    return ax.plot(P[:, 0], P[:, 1], **kw)[0]
+
+
+def _fixed_joints(ax: Any, B: np.ndarray, spatial: bool, label: str | None) -> None:
+    """The fixed joints as black triangles."""
+    if spatial:
+        ax.scatter(B[:, 0], B[:, 1], B[:, 2], marker="^", c="k", s=36, label=label)
+    else:
+        ax.scatter(B[:, 0], B[:, 1], marker="^", c="k", s=36, zorder=3, label=label)
 
 
 def chain_points(mech: Mechanism, r: KinResult) -> list[np.ndarray]:
@@ -281,18 +297,11 @@ def animate(
     fig = _figure(path, (5.4, 5.0))
     ax = fig.add_subplot(projection="3d" if spatial else None)
     _frame_axes(ax, spatial, lims)
-    B = draws[0].base
-    if len(B):
-        if spatial:
-            ax.scatter(B[:, 0], B[:, 1], B[:, 2], marker="^", c="k", s=36, label="fixed joints")
-        else:
-            ax.scatter(B[:, 0], B[:, 1], marker="^", c="k", s=36, zorder=3,
-                       label="fixed joints")
+    if len(draws[0].base):
+        _fixed_joints(ax, draws[0].base, spatial, "fixed joints")
 
     def new_line(**kw):
-        if spatial:
-            return ax.plot([], [], [], **kw)[0]
-        return ax.plot([], [], **kw)[0]
+        return _line(ax, np.zeros((0, 3)), spatial, **kw)
 
     d0 = draws[0]
     legs = [new_line(color="C0", lw=2, marker="o", ms=3.5, label="leg chains" if j == 0 else None)
@@ -367,9 +376,7 @@ def _panel(ax: Any, d: Any, spatial: bool, color: str | None, label: str | None,
                 text if legend and label is None else None)
 
     def line(P, **kw):
-        if spatial:
-            return ax.plot(P[:, 0], P[:, 1], P[:, 2], **kw)
-        return ax.plot(P[:, 0], P[:, 1], **kw)
+        return _line(ax, P, spatial, **kw)
 
     leg_c = color or "C0"
     for j, P in enumerate(d.legs):
@@ -389,12 +396,7 @@ def _panel(ax: Any, d: Any, spatial: bool, color: str | None, label: str | None,
         line(_polygon(np.asarray(d.base, dtype=float)), color="0.35", lw=1.2, ls="--",
              label=lab("base"))
     if len(d.base):
-        B = d.base
-        kw = {"marker": "^", "c": "k", "s": 36, "label": lab("fixed joints")}
-        if spatial:
-            ax.scatter(B[:, 0], B[:, 1], B[:, 2], **kw)
-        else:
-            ax.scatter(B[:, 0], B[:, 1], zorder=3, **kw)
+        _fixed_joints(ax, d.base, spatial, lab("fixed joints"))
 
 
 def _frame_axes(ax: Any, spatial: bool, lims: list[tuple[float, float]]) -> None:

@@ -734,22 +734,9 @@ def _failed_status(curves: SingularCurves) -> str:
 # ---------------------------------------------------------------------------------------
 
 
-def _figure(path, figsize, layout=None):
-    """A new Figure: out of pyplot when it goes to a file (nothing to close; no backend
-    switched under the caller, e.g. a notebook's), a pyplot figure otherwise."""
-    if path is not None:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=figsize, layout=layout)
-        FigureCanvasAgg(fig)
-        return fig
-    import matplotlib.pyplot as plt
-
-    return plt.figure(figsize=figsize, layout=layout)
-
-
 def _fig(nr, nc, w=4.0, h=4.0, path=None):
+    from ..plot import _figure
+
     fig = _figure(path, (w * nc, h * nr), "constrained")
     return fig, fig.subplots(nr, nc, squeeze=False)
 
@@ -759,6 +746,8 @@ def _axes(ax, figsize, three_d: bool = False, path=None):
     of ``figsize`` with one (3-D) axes (kept out of pyplot when it goes to ``path``)."""
     if ax is not None:
         return ax.figure, ax, False
+    from ..plot import _figure
+
     fig = _figure(path, figsize)
     return fig, fig.add_subplot(projection="3d" if three_d else None), True
 

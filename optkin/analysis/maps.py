@@ -287,8 +287,7 @@ def plot_singularity_map(
     if unknown:
         raise MechanismError(f"plot_singularity_map: unknown argument(s) {unknown}; known: "
                              f"{list(_KWARGS)} (of singularity_map)")
-    from ..plot import DPI
-    from .aspects import _figure
+    from ..plot import DPI, _figure
 
     sm = singularity_map(mech, u, v, **kwargs)
     Z = sm.values[measure]

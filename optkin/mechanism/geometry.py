@@ -22,25 +22,26 @@ def wrap_angle(a):
     return w if w.ndim else float(w)
 
 
-def _R(kind: str, *args) -> Any:
+def _Rotation() -> Any:
+    """scipy's Rotation (imported on first use: ``import optkin`` stays lean)."""
     from scipy.spatial.transform import Rotation
 
-    return getattr(Rotation, kind)(*args)
+    return Rotation
 
 
 def rot_x(a: float) -> np.ndarray:
     """The rotation by ``a`` about x."""
-    return _R("from_euler", "x", float(a)).as_matrix()
+    return _Rotation().from_euler("x", float(a)).as_matrix()
 
 
 def rot_y(a: float) -> np.ndarray:
     """The rotation by ``a`` about y."""
-    return _R("from_euler", "y", float(a)).as_matrix()
+    return _Rotation().from_euler("y", float(a)).as_matrix()
 
 
 def rot_z(a: float) -> np.ndarray:
     """The rotation by ``a`` about z."""
-    return _R("from_euler", "z", float(a)).as_matrix()
+    return _Rotation().from_euler("z", float(a)).as_matrix()
 
 
 def rot2(a: float) -> np.ndarray:
@@ -52,7 +53,7 @@ def rot2(a: float) -> np.ndarray:
 def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """R = Rz(yaw) Ry(pitch) Rx(roll): scipy's ``Rotation.from_euler("ZYX", [yaw, pitch,
     roll])`` (intrinsic z-y'-x'')."""
-    return _R("from_euler", "ZYX", [float(yaw), float(pitch), float(roll)]).as_matrix()
+    return _Rotation().from_euler("ZYX", [float(yaw), float(pitch), float(roll)]).as_matrix()
 
 
 def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
@@ -60,7 +61,7 @@ def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
     pitch = +-pi/2, where only yaw -+ roll is defined, roll = 0)."""
     with warnings.catch_warnings():  # the gimbal-lock note: roll = 0 there, as documented
         warnings.simplefilter("ignore", UserWarning)
-        yaw, pitch, roll = _R("from_matrix", np.asarray(R, dtype=float)).as_euler("ZYX")
+        yaw, pitch, roll = _Rotation().from_matrix(np.asarray(R, dtype=float)).as_euler("ZYX")
     return np.array([roll, pitch, yaw])
 
 
@@ -68,18 +69,18 @@ def euler_xyz(R: np.ndarray) -> np.ndarray:
     """Angles (a, b, c) with R = Rx(a) Ry(b) Rz(c) (scipy's intrinsic "XYZ")."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        return _R("from_matrix", np.asarray(R, dtype=float)).as_euler("XYZ")
+        return _Rotation().from_matrix(np.asarray(R, dtype=float)).as_euler("XYZ")
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation of a quaternion (w, x, y, z); normalised first."""
     w, x, y, z = np.asarray(q, dtype=float)
-    return _R("from_quat", [x, y, z, w]).as_matrix()
+    return _Rotation().from_quat([x, y, z, w]).as_matrix()
 
 
 def matrix_to_quat(R: np.ndarray) -> np.ndarray:
     """Quaternion (w, x, y, z) with w >= 0 of a rotation matrix."""
-    x, y, z, w = _R("from_matrix", np.asarray(R, dtype=float)).as_quat()
+    x, y, z, w = _Rotation().from_matrix(np.asarray(R, dtype=float)).as_quat()
     q = np.array([w, x, y, z])
     return q if q[0] >= 0 else -q
 

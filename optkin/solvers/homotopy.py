@@ -403,8 +403,8 @@ class _Tracker:
         self.width = 2 * n + 4 + (6 * n + 2 if predictor == "hermite" else 0)
         self.predictor = predictor
         self.fused_cond = n <= 3 and sx
-        # the last Newton step's factorisation also gives the Hermite tangent (at the
-        # point before its update, within accept_tol of the accepted one)
+        # the second Newton update's factorisation also gives the Hermite tangent (at the
+        # point before that update, close to the accepted one)
         fused = predictor == "hermite" and n > SMALL
         # a step is accepted when the last Newton update is this small (relative): 1e-6
         # for small systems; 1e-4 for the fused ones, whose quadratic convergence puts the
@@ -440,7 +440,7 @@ class _Tracker:
                 DTH = (dsr * d[0] - dsi * d[1], dsr * d[1] + dsi * d[0])
                 return TH, DTH
 
-            def csolve(Jr, Ji, br, bi, x):  # equilibrated as in _solve_scaled
+            def csolve(Jr, Ji, br, bi, x, scale=None):  # equilibrated as in _solve_scaled
                 if n <= 3 and sx:  # the complex adjugate: a 6 x 6 real QR costs 5x more
                     return _adjugate_solve(Jr, Ji, br, bi)
                 if n <= SMALL:
@@ -451,7 +451,8 @@ class _Tracker:
                          ca.solve(A, ca.vertcat(br, bi), "qr"))
                     return u[:n], u[n:]
                 # the complex elimination written out (:func:`_clu`), equilibrated
-                return _clu(n, br.shape[1])(Jr, Ji, br, bi, ca.fmax(1, absc(x) / sc))
+                scale = sc if scale is None else scale
+                return _clu(n, br.shape[1])(Jr, Ji, br, bi, ca.fmax(1, absc(x) / scale))
 
             def rhs(x, t):
                 TH, DTH = theta(t)
@@ -493,20 +494,20 @@ class _Tracker:
             ok = _finite(ca.vertcat(*Xp))
             Xp = tuple(ca.if_else(ok, Xp[i], Xa[i]) for i in (0, 1))
             size = 1 + ca.mmax(absc(Xp) / sc)
-            def newton_step(Xp, prev, ok, tangent, size):
-                """One Newton update at tn, kept only while the updates contract (with
-                the Hermite tangent from the same factorisation when asked)."""
+            def newton_step(Xp, prev, ok, tangent, size, TH, scale):
+                """One Newton update at parameters TH, kept only while the updates
+                contract (with the Hermite tangent from the same factorisation when asked)."""
                 kn = None
                 if tangent:
-                    Hr, Hi, Jr, Ji, Tr, Ti = f_all(Xp[0], Xp[1], THn[0], THn[1],
+                    Hr, Hi, Jr, Ji, Tr, Ti = f_all(Xp[0], Xp[1], TH[0], TH[1],
                                                    DTHn[0], DTHn[1])
-                    ur, ui = csolve(Jr, Ji, ca.horzcat(Hr, Tr), ca.horzcat(Hi, Ti), Xp)
+                    ur, ui = csolve(Jr, Ji, ca.horzcat(Hr, Tr), ca.horzcat(Hi, Ti), Xp, scale)
                     up, kn = (ur[:, 0], ui[:, 0]), (-ur[:, 1], -ui[:, 1])
                 else:
-                    Hr, Hi, Jr, Ji = f_hj(Xp[0], Xp[1], THn[0], THn[1])
-                    up = csolve(Jr, Ji, Hr, Hi, Xp)
+                    Hr, Hi, Jr, Ji = f_hj(Xp[0], Xp[1], TH[0], TH[1])
+                    up = csolve(Jr, Ji, Hr, Hi, Xp, scale)
                 fin = _finite(ca.vertcat(*up))
-                nrm = ca.if_else(fin, ca.mmax(absc(up) / sc) / size, ca.inf)
+                nrm = ca.if_else(fin, ca.mmax(absc(up) / scale) / size, ca.inf)
                 ok = ca.logic_and(ca.logic_and(ok, fin), ca.logic_or(
                     nrm <= ca.fmax(0.5 * prev, 1e-9), prev <= NOISE))
                 Xp = tuple(Xp[i] - ca.if_else(ok, up[i], 0) for i in (0, 1))
@@ -523,11 +524,8 @@ class _Tracker:
                 if fused and it > tan_it:
                     xs, pv, okk = sym.sym("x", 2 * n), sym.sym("prev"), sym.sym("ok")
                     ths, scs, szs = sym.sym("th", 2 * nth), sym.sym("sc", n), sym.sym("size")
-                    # (the helper reads THn and sc from the enclosing graph: bind them)
-                    THk, sck = THn, sc
-                    THn, sc = (ths[:nth], ths[nth:]), scs
-                    Xq, nq, oq, _ = newton_step((xs[:n], xs[n:]), pv, okk, False, szs)
-                    THn, sc = THk, sck
+                    Xq, nq, oq, _ = newton_step((xs[:n], xs[n:]), pv, okk, False, szs,
+                                                (ths[:nth], ths[nth:]), scs)
                     extra = ca.Function("homotopy_newton", [xs, pv, okk, ths, scs, szs],
                                         [ca.vertcat(Xq[0], Xq[1], nq, oq)])
                     packed = ca.vertcat(Xp[0], Xp[1], prev, ok)
@@ -536,7 +534,7 @@ class _Tracker:
                         size), packed, True)
                     Xp, prev, ok = (res[:n], res[n:2 * n]), res[2 * n], res[2 * n + 1]
                     continue
-                Xp, nrm, ok, k = newton_step(Xp, prev, ok, it == tan_it, size)
+                Xp, nrm, ok, k = newton_step(Xp, prev, ok, it == tan_it, size, THn, sc)
                 if k is not None:
                     kn = k
                 if first is None:

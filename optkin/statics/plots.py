@@ -23,7 +23,7 @@ def _subplots(figsize: tuple[float, float], path: object, ax: object):
         if not hasattr(ax, "plot") or not hasattr(ax, "figure"):
             raise StaticsError(f"ax: expected a matplotlib Axes, got {type(ax).__name__}")
         return ax.figure, ax, False
-    from ..analysis.aspects import _figure
+    from ..plot import _figure
 
     fig = _figure(path, figsize)
     return fig, fig.add_subplot(), True
