@@ -1,4 +1,4 @@
-"""Singular loci by continuation and generalized aspects of the five-bar of seed 004, each
+"""Singular loci by continuation and generalized aspects of the five-bar of Chablat & Wenger 1998, each
 beside an in-run brute-force grid (2000 x 2000 per working mode, numpy, hand-written
 inverse kinematics and det A; for the aspects, connected components by scipy.ndimage).
 

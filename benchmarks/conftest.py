@@ -114,7 +114,7 @@ def ref(request) -> Reference:
 
 
 def numpy_residual(mech: optkin.Mechanism) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """The closure residual written in numpy (leg mechanisms: one row per leg, seed 003),
+    """The closure residual written in numpy (leg mechanisms: one row per leg, Özgören),
     independent of the CasADi model; Khalil mechanisms: the model's SX Function called from
     Python, which is what a user of scipy would write."""
     if mech.kind != "legs":

@@ -4,7 +4,7 @@ assembly_modes, jacobians, classify, statics.capability, singular_curves, aspect
 Each beside an in-run baseline: finite differences of an fsolve direct model (jacobians,
 classify), naive random multi-start IPOPT (assembly_modes), scipy.optimize.linprog
 (capability), a brute-force numpy grid of det A (singular curves and aspects of the
-five-bar of seed 004).
+five-bar of Chablat & Wenger 1998).
 """
 
 from __future__ import annotations
@@ -178,7 +178,7 @@ def test_singular_curves_five_bar(benchmark):
     base = median_time(_five_bar_grid, min_time=0.1, max_rounds=3)
     curves = getattr(out, "curves", out)
     record(benchmark, base, "numpy grid 1000x1000 x 4 working modes, det A sign changes",
-           mechanism="five_bar seed 004", status=getattr(out, "status", "optimal"), nit=0,
+           mechanism="five_bar Chablat & Wenger 1998", status=getattr(out, "status", "optimal"), nit=0,
            curves=len(curves) if hasattr(curves, "__len__") else None, target_s=0.5)
 
 
@@ -189,5 +189,5 @@ def test_aspects_five_bar(benchmark):
     base = median_time(_five_bar_grid, min_time=0.1, max_rounds=3)
     items = getattr(out, "aspects", out)
     record(benchmark, base, "numpy grid 1000x1000 x 4 working modes, det A sign changes",
-           mechanism="five_bar seed 004", status=getattr(out, "status", "optimal"), nit=0,
+           mechanism="five_bar Chablat & Wenger 1998", status=getattr(out, "status", "optimal"), nit=0,
            aspects=len(items) if hasattr(items, "__len__") else None, target_s=2.0)

@@ -2,9 +2,9 @@
 
     python examples/aspects_pictures.py [out_dir]   # default docs/pictures
 
-1. The five-bar of Chablat & Wenger (seed 004: L0 = 9, L1 = 8, L2 = 5, L3 = 5, L4 = 8):
+1. The five-bar of Chablat & Wenger 1998 (L0 = 9, L1 = 8, L2 = 5, L3 = 5, L4 = 8):
    parallel (red) and serial (blue) singular curves in the joint space and in the
-   workspace (seed 004, sections 3.2-3.3), the workspace of each of the four working
+   workspace (Chablat & Wenger 1998, sections 3.2-3.3), the workspace of each of the four working
    modes (Figs. 9-12), and the generalized aspects of each working mode, coloured, with
    their joint-space projections (serial aspects QA).
 2. A 3-RPR (A1 = (0, 0), A2 = (15.91, 0), A3 = (0, 10); platform sides 17.04, 16.54,

@@ -2,7 +2,7 @@
 
     python examples/singularity_maps.py [out_dir]   # default docs/pictures
 
-1. The five-bar of Chablat & Wenger (seed 004: L0 = 9, L1 = 8, L2 = 5, L3 = 5, L4 = 8) over
+1. The five-bar of Chablat & Wenger 1998 (L0 = 9, L1 = 8, L2 = 5, L3 = 5, L4 = 8) over
    its workspace (x, y) in the working mode of the first posture found: log10 of
    min(parallel, serial margin) of optkin.classify; the dark valleys are the parallel
    singularities (C, P, D aligned) and the workspace boundary the serial ones.

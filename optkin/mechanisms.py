@@ -182,7 +182,7 @@ def rrr3(
 
 
 def five_bar(L0: float, L1: float, L2: float, L3: float, L4: float) -> Mechanism:
-    """The RR-RRR five-bar of Chablat and Wenger (seed 004).
+    """The RR-RRR five-bar of Chablat and Wenger 1998.
 
     Base joints A = (0, 0) and B = (L0, 0); |AC| = L1, |CP| = L2, |PD| = L3, |DB| = L4;
     q_a = (theta1 at A, theta2 at B), angles from the x axis; the end effector is P.
@@ -347,7 +347,7 @@ def delta(
 def sr400(
     d2: float = 0.15, d3: float = 0.6, d4: float = 0.1, d8: float = 0.25, rl4: float = 0.65
 ) -> Mechanism:
-    """The Acma SR400 of Table 7.1 (seed 000): six actuated revolutes and a parallelogram.
+    """The Acma SR400 of Table 7.1 (Khalil & Dombre 2002): six actuated revolutes and a parallelogram.
 
     d9 = d3 and d10 = -d8 as in the table; the loop is cut at joint 9 (frames 9 and 10).
     The end effector is frame 6.
@@ -397,7 +397,7 @@ def akr3000(
     gamma13: float = 0.4,
     gamma14: float = 1.2,
 ) -> Mechanism:
-    """The AKR-3000 painting robot of Table 7.2 (seed 000): two loops, 12 joints.
+    """The AKR-3000 painting robot of Table 7.2 (Khalil & Dombre 2002): two loops, 12 joints.
 
     Active: theta1, r5, r6 (the two cylinders), theta8, theta9, theta10; passive theta2,
     theta3, theta4, theta7; cut joints theta11 (loop of links 5 and 7) and theta12 (loop of
@@ -545,12 +545,12 @@ def prr3(base: Any, directions: Any, platform: Any, distal: Any) -> Mechanism:
 def hexa(base_radius: float = 0.5, platform_radius: float = 0.15, crank: float = 0.35,
          rod: float = 0.8, base_spread: float = 0.3, platform_spread: float = 0.25
          ) -> Mechanism:
-    """The Hexa (Pierrot 1991; seed 004, Fig. 4): six RUS legs in three pairs.
+    """The Hexa (Pierrot 1991; Chablat & Wenger 1998, Fig. 4): six RUS legs in three pairs.
 
     Leg i turns an arm (``crank``) about the tangent of the base circle at angle
     ``2 pi k / 3 +- base_spread``; a rod of length ``rod`` joins the arm's tip to the
     platform point at ``2 pi k / 3 +- platform_spread`` on the platform circle. Six
-    degrees of freedom, 2^6 = 64 working modes (seed 004, Example 1); q_a = the arm angles
+    degrees of freedom, 2^6 = 64 working modes (Chablat & Wenger 1998, Example 1); q_a = the arm angles
     (0: arm radial outwards, turning downwards as theta grows).
 
     Examples

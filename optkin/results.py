@@ -154,7 +154,7 @@ class KinResult:
         Iterations used.
     posture : tuple or None
         For inverse solutions: the branch index of each leg; ``working_mode`` the sign of
-        each B_jj (seed 004) where that applies.
+        each B_jj (Chablat & Wenger 1998) where that applies.
     certified : bool or None
         None unless certification was asked for (``assembly_modes(..., certify=True)``,
         :func:`optkin.certify`); then True when Krawczyk's test proved that a box around

@@ -171,7 +171,7 @@ def test_tsai_3upu_translates_and_its_twist_has_no_rotation():
     assert np.linalg.matrix_rank(jac.J_a[:3]) == 3
 
 
-# Grubler (seed 003): m = lambda n_mb - sum (lambda - f_k) = sum f - lambda loops, lambda = 6
+# Grubler (Özgören): m = lambda n_mb - sum (lambda - f_k) = sum f - lambda loops, lambda = 6
 #   3-UPU: 3 x (2 + 1 + 2) freedoms, 7 bodies, 9 joints (2 loops): 15 - 12 = 3
 #   3-RPS: 3 x (1 + 1 + 3) = 15 - 12 = 3;  3-PSP: 3 x (1 + 3 + 1) = 15 - 12 = 3
 #   3-RPR (planar, lambda = 3): 3 x 3 = 9 - 6 = 3

@@ -1,7 +1,7 @@
-"""Working modes, generalized aspects and workspaces (Chablat & Wenger, seed 004).
+"""Working modes, generalized aspects and workspaces (Chablat & Wenger 1998).
 
 Independent evidence: a fine grid over the workspace per working mode with the five-bar's
-inverse kinematics, A and B written out by hand (seed 004, eqs. 7b-7c), its connected
+inverse kinematics, A and B written out by hand (Chablat & Wenger 1998, eqs. 7b-7c), its connected
 components counted with scipy.ndimage; the workspace area against the closed form of the
 intersection of two annuli (circle-lens areas); joint limits against a grid count.
 """
@@ -98,7 +98,7 @@ def grid_labels():
 
 def test_four_working_modes(five_bar, asp):
     modes = leg_working_modes(five_bar)
-    assert len(modes) == 4 and len(set(modes)) == 4  # seed 004, section 3.4
+    assert len(modes) == 4 and len(set(modes)) == 4  # Chablat & Wenger 1998, section 3.4
     assert asp.working_modes == modes
     assert set(asp.counts) == set(modes)
 

@@ -1,8 +1,8 @@
 """Singular curves by continuation, checked against closed forms and brute-force grids.
 
-Independent evidence: the five-bar's A and B of Chablat & Wenger (seed 004, eqs. 7b-7c) and
+Independent evidence: the five-bar's A and B of Chablat & Wenger (1998, eqs. 7b-7c) and
 its inverse kinematics written out by hand; the four-bar loop equation of Modern Robotics
-7.3 (seed 001, L1 = L2 = 4, L3 = L4 = 2); the 3-RPR's A written out by hand, with finite
+7.3 (Lynch & Park 2017, L1 = L2 = 4, L3 = L4 = 2); the 3-RPR's A written out by hand, with finite
 differences for the cusp condition. Grids are computed here, in numpy, never by optkin.
 """
 
@@ -73,7 +73,7 @@ def fb_ik(P, s1, s2):
 
 
 def fb_AB(t1, t2, P):
-    """det A (seed 004 eq. 7b) and the B_jj (eq. 7c) up to positive factors."""
+    """det A (Chablat & Wenger 1998 eq. 7b) and the B_jj (eq. 7c) up to positive factors."""
     C = L1 * u2(t1)
     D = BASE_B + L4 * u2(t2)
     detA = cross(P - C, P - D)
@@ -93,7 +93,7 @@ def test_five_bar_parallel_points_satisfy_closed_form(five_bar):
         # the closure, by hand
         assert np.max(np.abs(np.linalg.norm(P - C, axis=1) - L2)) < 1e-9
         assert np.max(np.abs(np.linalg.norm(P - D, axis=1) - L3)) < 1e-9
-        # C, D and P aligned (seed 004, section 3.2)
+        # C, D and P aligned (Chablat & Wenger 1998, section 3.2)
         assert np.max(np.abs(cross(P - C, P - D))) < 1e-8
         # all curves close (angles periodic, workspace bounded)
         assert all(c.closed for c in r.curves)
@@ -141,7 +141,7 @@ def test_five_bar_parallel_vs_workspace_grid(five_bar):
 
 def test_five_bar_joint_space_vs_grid(five_bar):
     """In the joint space the parallel locus is |C - D| = L2 + L3 (P between C and D) or
-    C = D (the coupler circle, projected to two points) - seed 004, section 3.2."""
+    C = D (the coupler circle, projected to two points) - Chablat & Wenger 1998, section 3.2."""
     r = singular_curves(five_bar, plane="joint", kind="parallel")
     V = np.vstack([c.v for c in r.curves])
     C, D = L1 * u2(V[:, 0]), BASE_B + L4 * u2(V[:, 1])
@@ -177,7 +177,7 @@ def test_five_bar_joint_space_vs_grid(five_bar):
 
 
 def test_five_bar_serial_curves(five_bar):
-    """B_jj = 0: A, C, P aligned (|AP| = L1 +- L2) or B, D, P aligned (seed 004, 3.3)."""
+    """B_jj = 0: A, C, P aligned (|AP| = L1 +- L2) or B, D, P aligned (Chablat & Wenger 1998, 3.3)."""
     r = singular_curves(five_bar, plane="workspace", kind="serial")
     assert r.success and r.max_residual < 1e-9
     for c in r.curves:

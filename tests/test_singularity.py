@@ -2,8 +2,8 @@
 
 Every expected verdict is derived here from the geometry of the configuration (collinear
 joints, concurrent or parallel leg lines, coincident joints), never from the code's output:
-Modern Robotics 7.3 (four-bar bifurcations, five-bar Figs. 7.7-7.9), MR 7.1 / seed 004
-(3-RPR parallel singularities), seed 000 [7.57]-[7.59] and the Bennett linkage.
+Modern Robotics 7.3 (four-bar bifurcations, five-bar Figs. 7.7-7.9), MR 7.1 / Chablat & Wenger 1998
+(3-RPR parallel singularities), Khalil & Dombre 2002 [7.57]-[7.59] and the Bennett linkage.
 """
 
 from __future__ import annotations
@@ -223,7 +223,7 @@ def bennett(a=1.0, alpha=np.pi / 3, beta=np.pi / 4, b=None):
     return optkin.Mechanism.from_khalil(rows, loops=1, name="Bennett")
 
 
-# (mechanism, Grubler count by hand, mobility): the hand counts use seed 003's formula
+# (mechanism, Grubler count by hand, mobility): the hand counts use Özgören's formula
 # m = lambda n_mb - sum (lambda - f) j with lambda = 3 (planar) or 6 (spatial).
 DOF_CASES = [
     ("rpr3", lambda: M.rpr3(RPR_BASE, RPR_PLAT), 3 * 7 - 2 * 9, 3),

@@ -2,7 +2,7 @@
 
 References: central finite differences of the solved forward map (optkin.forward with a warm
 guess), second-order differences for the acceleration term [7.52], the closed forms of
-Examples 7.7 (SR400) and 7.8 (AKR-3000) of seed 000, leg formulas of Chablat-Wenger's A and
+Examples 7.7 (SR400) and 7.8 (AKR-3000) of Khalil & Dombre 2002, leg formulas of Chablat-Wenger's A and
 B written here, and Modern Robotics' Stewart-Gough statics checked against leg lengths
 differentiated along a screw motion.
 """
@@ -353,7 +353,7 @@ def test_five_bar_A_and_B_by_hand():
                          -(Pv - C2) @ (L4 * np.array([-np.sin(t2), np.cos(t2)])) / L3])
             np.testing.assert_allclose(jac.A, A, atol=1e-12)
             np.testing.assert_allclose(jac.B, B, atol=1e-12)
-            # working mode = signs of diag(B) (seed 004) as reported by inverse
+            # working mode = signs of diag(B) (Chablat & Wenger 1998) as reported by inverse
             assert tuple(int(v) for v in np.sign(np.diag(jac.B))) == s.working_mode
 
 

@@ -1,6 +1,6 @@
 """Analyses of a compiled mechanism: velocity and acceleration models, degrees of freedom,
-singularity classification and maps (seed 000 7.8-7.11, Modern Robotics 7.2-7.3, seeds 003
-and 004)."""
+singularity classification and maps (Khalil & Dombre 2002, 7.8-7.11; Lynch & Park 2017,
+7.2-7.3; Özgören; Chablat & Wenger 1998)."""
 
 from .aspects import Aspect, Aspects, Workspace, aspects, workspace
 from .continuation import Curve, SingularCurves, singular_curves

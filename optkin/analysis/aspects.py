@@ -1,6 +1,6 @@
 """Working modes, generalized aspects and workspaces of planar parallel mechanisms.
 
-Chablat and Wenger (seed 004): a working mode Mf_i is a set of configurations where the
+Chablat and Wenger 1998: a working mode Mf_i is a set of configurations where the
 signs of the diagonal entries B_jj of the inverse-kinematics matrix stay constant and
 nonzero (Definition 4); the generalized aspects A_ij are the maximal connected subsets of a
 working mode free of parallel singularities, det A != 0 (Definition 5); their projections
@@ -57,7 +57,7 @@ __all__ = ["Aspect", "Aspects", "Workspace", "aspects", "workspace", "leg_workin
 
 
 def leg_working_modes(mech: Mechanism) -> list[tuple[int, ...]]:
-    """All sign patterns of diag(B) of a fully parallel mechanism (seed 004, Def. 4), in
+    """All sign patterns of diag(B) of a fully parallel mechanism (Chablat & Wenger 1998, Def. 4), in
     the model's order (:meth:`optkin.model.core.Model.working_modes`).
 
     A leg whose actuated joint moves the centre of its distance constraint has two
@@ -74,7 +74,7 @@ def leg_working_modes(mech: Mechanism) -> list[tuple[int, ...]]:
 
 @dataclass
 class Aspect:
-    """One generalized aspect A_ij (seed 004, Definition 5).
+    """One generalized aspect A_ij (Chablat & Wenger 1998, Definition 5).
 
     Attributes
     ----------
@@ -387,7 +387,7 @@ def aspects(
     qa_grid: int = 200,
     step: float | None = None,
 ) -> Aspects:
-    """The generalized aspects of every working mode (Chablat and Wenger, seed 004).
+    """The generalized aspects of every working mode (Chablat and Wenger 1998).
 
     Parameters
     ----------
@@ -588,7 +588,7 @@ def workspace(
 
     Its boundary is made of serial singular curves (B_jj = 0) and joint-limit curves,
     traced by continuation; the regions are the faces of their arrangement that the
-    working mode reaches, with polygon areas (seed 004, Figs. 9-12).
+    working mode reaches, with polygon areas (Chablat & Wenger 1998, Figs. 9-12).
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """Generalized aspects of 3-DoF planar platforms in (x, y, phi), from exact sections.
 
-A generalized aspect (Chablat and Wenger, seed 004) of a 3-DoF planar platform is a
+A generalized aspect (Chablat and Wenger 1998) of a 3-DoF planar platform is a
 connected component, in one working mode, of the configurations with det A != 0 within the
 actuators' strokes: a region of (x, y, phi). At a fixed orientation phi its section is a
 union of faces of the planar arrangement of the singular and limit curves, which

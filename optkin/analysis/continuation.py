@@ -2,7 +2,7 @@
 
 A singular locus of a 2-DoF mechanism (or of a 2-D section of a 3-DoF one) is a curve in the
 configuration manifold {Phi(q_a, x) = 0}: the zero set of one more scalar function c on it,
-det W_p (parallel singularities; Chablat and Wenger's det A, seed 004), one B_jj (serial
+det W_p (parallel singularities; det A of Chablat & Wenger 1998), one B_jj (serial
 singularities of leg j), or q_a,j - limit (a joint-limit boundary). With the variables
 v = (q_a, x), the fixed ones of a section removed (z), the curve is the solution set of
 
@@ -16,14 +16,14 @@ Simple branch points are detected by a sign change of det [dG/dz; t^T] between t
 located by bisection, and every branch through them is followed (the second branch starts
 from the branch point along the null direction of dG/dz orthogonal to the first branch).
 Seeds come from sign changes of c on a coarse grid of a closed-form chart of the manifold
-(the platform coordinates with each leg's closed-form inverse, seed 003; planar platforms
+(the platform coordinates with each leg's closed-form inverse, Özgören; planar platforms
 whose legs are distance constraints, :mod:`optkin.model.charts`), refined by Newton; the
 grid only seeds: every point returned is a corrected point of the curve. Mechanisms
 without such a chart (Khalil tables) are seeded by multi-start Newton on the model.
 
 For a 1-DoF mechanism (the four-bar) the curve is the configuration space itself
 (``kind="closure"``, G = Phi) and its bifurcation points are the C-space singularities of
-Modern Robotics 7.3 (seed 001).
+Modern Robotics 7.3 (Lynch & Park 2017).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 A parallel mechanism is *cuspidal* when it can pass from one assembly mode to another
 without meeting a parallel singularity (det A keeps its sign; Innocenti and Parenti-Castelli
-1992, McAree and Daniel 1999, seed 003). Near a cusp point of the singular locus in the
+1992, McAree and Daniel 1999, Özgören). Near a cusp point of the singular locus in the
 joint space the direct kinematics has the normal form x^3 + a x + b = 0: inside the cusp's
 wedge three local solutions, outside one. A loop that starts inside the wedge, leaves it
 across one fold (where the two *other* solutions merge) and comes back across the other

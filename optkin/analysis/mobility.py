@@ -2,7 +2,7 @@
 
 :func:`dof` reports two numbers that should agree for ordinary mechanisms:
 
-* ``grubler`` - the Kutzbach-Grubler count of seed 003,
+* ``grubler`` - the Kutzbach-Grubler count of Özgören,
   m = lambda n_mb - sum_k (lambda - k) j_k, written with the number of independent
   kinematic loops n_ikl = j_tot - n_mb as m = sum_i f_i - sum_loops lambda_j (so that a
   planar loop counts lambda = 3 and a spatial loop lambda = 6, [7.57]). It counts links and
@@ -50,7 +50,7 @@ class DofReport:
     Attributes
     ----------
     grubler : int
-        The Kutzbach-Grubler count (seed 003).
+        The Kutzbach-Grubler count (Özgören).
     mobility : int
         min dim null(J) over the sampled closed configurations [7.58].
     constraints : int

@@ -18,7 +18,7 @@ when its margin is below ``rtol``.
                       locked. Platforms whose unknowns are the platform coordinates: A
                       singular (PSFK/MSFK); otherwise W_p singular with a null motion that
                       moves the end effector.
-``internal``          W_p of [7.49] singular (seed 000, 7.11): passive motion with
+``internal``          W_p of [7.49] singular (Khalil & Dombre 2002, sec. 7.11): passive motion with
                       qdot_a = 0 (where W_p = dPhi/dx over the platform coordinates it
                       coincides with ``parallel``).
 ``configuration_space`` rank H < c, c the generic rank of the constraint Jacobian over all
@@ -31,7 +31,7 @@ when its margin is below ``rtol``.
                       loses rank (MR 7.3, independent of the actuated joints).
 ===================== ======================================================================
 
-Aliases of the slides (seed 003) are reported in ``aliases``: PSFK and MSFK for parallel,
+Aliases of the slides (Özgören) are reported in ``aliases``: PSFK and MSFK for parallel,
 PSIK and MSIK for serial (with the legs concerned), and the [7.60] case "both".
 """
 
@@ -79,7 +79,7 @@ class SingularityReport:
         Type -> the smallest relative singular value behind the verdict (the second-order
         coefficient for ``actuator_degenerate``; NaN when not evaluated).
     aliases : dict
-        Slide names (seed 003) -> bool: PSFK, MSFK (= parallel), PSIK, MSIK (= serial), and
+        Slide names (Özgören) -> bool: PSFK, MSFK (= parallel), PSIK, MSIK (= serial), and
         "both" ([7.60] iii).
     legs_at_psik : tuple of int
         Legs (1-based) whose B_ii vanishes (PSIK(k) of the slides); platforms only.

@@ -1,6 +1,6 @@
 """Velocity and acceleration models of closed chains: :func:`jacobians`.
 
-Khalil mechanisms (seed 000, 7.8): the kinematic constraint equation [7.49]
+Khalil mechanisms (Khalil & Dombre 2002, sec. 7.8): the kinematic constraint equation [7.49]
 
     [W_a  W_p  0  ] [qdot_a]
     [W_ac W_pc W_c] [qdot_p] = 0,      qdot_p = -W_p^-1 W_a qdot_a = W qdot_a   [7.51]
@@ -12,7 +12,7 @@ configuration the position and the x/y rotation rows of a loop do not depend on 
 velocity of a revolute cut joint (its frame origin and z axis do not move with it), so
 the rows split into the two block rows of [7.49] exactly as in Example 7.8 (ii).
 
-Leg-described platforms (seed 004): where the model's unknowns are the platform
+Leg-described platforms (Chablat & Wenger 1998): where the model's unknowns are the platform
 coordinates (every leg in its reduced form), the model rows f_i(q_a, x) = |P_i(x) -
 C_i(q_a,i)| - l_i give Chablat and Wenger's A t + B qdot_a = 0 with A = (df/dx) E(x) (E
 maps the platform twist t to coordinate rates x_dot) and B = df/dq_a diagonal. Legs in

@@ -5,7 +5,7 @@ input, so a new design compiles nothing): for task coordinates t (the platform's
 coordinates) and a working mode sigma (the signs of diag(B)), each leg's actuated value
 from its closed-form inverse on the branch whose B_jj has the sign sigma_j, whether every
 leg reaches, det A, and the conditioning of the forward kinematic Jacobian
-J = -A^-1 B (t' = J q_a' [seed 004, A t' + B q_a' = 0]).
+J = -A^-1 B (t' = J q_a' [Chablat & Wenger 1998, A t' + B q_a' = 0]).
 
 The conditioning is 1/kappa of the inverse Jacobian J^-1 = -B^-1 A (kappa(J) =
 kappa(J^-1)) in the 2-norm, with the task's angular coordinates multiplied by a

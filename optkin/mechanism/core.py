@@ -81,7 +81,7 @@ class Mechanism:
         dof: int | None = None,
         limits: Mapping[str, Sequence[float | None]] | None = None,
     ) -> Mechanism:
-        """A mechanism from its Khalil table (seed 000, Tables 7.1 and 7.2).
+        """A mechanism from its Khalil table (Khalil & Dombre 2002, Tables 7.1 and 7.2).
 
         Parameters
         ----------

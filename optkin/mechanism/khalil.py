@@ -1,4 +1,5 @@
-"""The Khalil-Kleinfinger description of tree and closed-chain robots (seed 000, 7.2-7.3).
+"""The Khalil-Kleinfinger description of tree and closed-chain robots
+(Khalil & Dombre 2002, secs. 7.2-7.3).
 
 One row per frame j: a(j), mu_j, sigma_j, gamma_j, b_j, alpha_j, d_j, theta_j, r_j.
 sigma_j = 0 revolute, 1 prismatic, 2 constant frame. A closed chain with B loops is

@@ -15,7 +15,7 @@ either
 
 Many classical legs are a distance constraint: the actuated joint moves a centre C (or is
 the distance itself) and a link of fixed length joins C to a platform point P, so
-``|P - C(q_a)| = l`` (seed 003's leg-by-leg equations; the rows of A and B of Chablat and
+``|P - C(q_a)| = l`` (Özgören's leg-by-leg equations; the rows of A and B of Chablat and
 Wenger). Such legs carry a :class:`Distance` description and the model uses this reduced
 one-row form by default; it gives the same configurations as the chain's full closure.
 

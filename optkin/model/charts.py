@@ -1,7 +1,7 @@
 """Closed-form charts of planar distance-leg mechanisms.
 
 A planar mechanism whose legs are all distance constraints ``|P_i - C_i(q_a,i)| = r_i``
-(seed 003: one equation per leg; :meth:`optkin.model.core.Model.distance_form`), one
+(Özgören: one equation per leg; :meth:`optkin.model.core.Model.distance_form`), one
 actuator per leg, has a closed-form chart of its configuration manifold: the platform
 coordinates x, with each leg's actuated value from its closed-form inverse (the model's
 :class:`~optkin.model.inverse.ClosedPart`, one or two branches per leg). Its loci are

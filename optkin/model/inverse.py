@@ -3,13 +3,13 @@
 Given the end-effector pose, a mechanism's joint values split into parts solved on their
 own and then combined:
 
-* a distance leg (seed 003: one equation per leg) in closed form: its actuated variable
+* a distance leg (Özgören: one equation per leg) in closed form: its actuated variable
   from :meth:`~optkin.mechanism.joints.Joint.solve_distance` of the joint that moves its
   centre (or |P - C| itself when the actuated joint is the distance), one or two branches,
   its other joints from the model's joint values (:class:`ClosedPart`);
 * a leg in chain form by a batched Newton search over its variables, the pose given
   (:class:`SearchPart`);
-* a Khalil table (seed 000, 7.6) by a search in two stages, the joints of the direct path
+* a Khalil table (Khalil & Dombre 2002, sec. 7.6) by a search in two stages, the joints of the direct path
   from the task equations then the others from the loops, or over all joints at once when
   the counts do not split that way.
 

@@ -9,7 +9,7 @@ of :mod:`optkin.statics.model` at one configuration, and names the twist and wre
 components of the end effector:
 
 * fully parallel mechanisms (:attr:`Model.fully_parallel`: one row and one actuator per
-  leg, Chablat and Wenger's A t + B qa_dot = 0, seed 004): the leg rows of the closure,
+  leg, Chablat and Wenger's A t + B qa_dot = 0, Chablat & Wenger 1998): the leg rows of the closure,
   A = W_p E with E mapping the platform twist to the rates of its coordinates
   (:meth:`Platform.xdot_of_twist`), B = W_a, P empty;
 * every other description (Khalil tables, legs in chain form): the augmented form

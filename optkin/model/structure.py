@@ -8,7 +8,7 @@ length scale as its last entry). The expressions depend on the mechanism's topol
 numbers enter through p. This module and :mod:`optkin.mechanism` are the only places that
 know what kind of description a mechanism has.
 
-Khalil tables (seed 000): x = the passive and cut joints; the rows are the position and
+Khalil tables (Khalil & Dombre 2002): x = the passive and cut joints; the rows are the position and
 Gibbs vector of frame k+B in frame k for every cut joint k ([7.8]); p holds (gamma, b,
 alpha, d, theta, r) of every frame.
 

@@ -1,6 +1,6 @@
 """Every assembly mode: multi-start enumeration with a measured completeness; path tracking.
 
-:func:`assembly_modes` solves the direct geometric model Phi(q_a, x) = 0 ([7.9] of seed 000)
+:func:`assembly_modes` solves the direct geometric model Phi(q_a, x) = 0 ([7.9] of Khalil & Dombre 2002)
 from many starting points at once. The starts are low-discrepancy (Sobol) points
 over the unknowns, drawn as the model says what each unknown is
 (:mod:`optkin.model.enumeration`): joint angles over [-pi, pi) for Khalil mechanisms; for
@@ -70,7 +70,7 @@ continuation with step halving) and stops with status ``"singular"`` where det W
 sign or W_p becomes ill-conditioned, instead of jumping to another mode.
 
 :func:`working_modes` lists the sign patterns of the diagonal B = W_a of a fully parallel
-mechanism (Chablat and Wenger, seed 004, Definition 4) and, at a pose, which exist.
+mechanism (Chablat and Wenger 1998, Definition 4) and, at a pose, which exist.
 """
 
 from __future__ import annotations
@@ -1636,7 +1636,7 @@ class WorkingModes:
 
 
 def working_modes(mech: Mechanism, pose: Any = None) -> WorkingModes:
-    """The working modes (sign patterns of diag B, seed 004) of a fully parallel mechanism.
+    """The working modes (sign patterns of diag B, Chablat & Wenger 1998) of a fully parallel mechanism.
 
     Parameters
     ----------
@@ -1664,7 +1664,7 @@ def working_modes(mech: Mechanism, pose: Any = None) -> WorkingModes:
         raise MechanismError(
             f"{mech.name}: working modes are defined for fully parallel mechanisms (one "
             "actuated joint per independent leg, each leg a distance constraint whose "
-            "closure row B = W_a is diagonal, seed 004); describe it with "
+            "closure row B = W_a is diagonal, Chablat & Wenger 1998); describe it with "
             "Mechanism.from_legs and distance legs"
         )
     if pose is None:

@@ -35,7 +35,7 @@ def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinR
     The closure Phi(q_a, x) = 0 is posed as the NLP  min |x - x_guess|^2  s.t.  Phi = 0
     and solved with IPOPT (the solver is built once per mechanism and reused, q_a and the
     guess being its parameters), so the guess selects the assembly mode nearest to it. With
-    ``method="auto"`` (default) a clamped Newton iteration from the guess (seed 000, 7.9) is
+    ``method="auto"`` (default) a clamped Newton iteration from the guess (Khalil & Dombre 2002, sec. 7.9) is
     tried first and IPOPT runs only when it fails; both end with a Newton polish.
 
     Parameters

@@ -1,10 +1,10 @@
 """The inverse geometric model: every posture for a given end-effector pose.
 
 The model splits the joint values into parts solved on their own (:mod:`optkin.model.
-inverse`): a distance leg in closed form (seed 003: one or two postures per leg), a leg in
-chain form or a Khalil table (seed 000, 7.6) by batched Newton from low-discrepancy starts,
+inverse`): a distance leg in closed form (Özgören: one or two postures per leg), a leg in
+chain form or a Khalil table (Khalil & Dombre 2002, sec. 7.6) by batched Newton from low-discrepancy starts,
 keeping distinct solutions. The postures are every combination of the parts' solutions,
-labelled with their working mode (the sign of each diagonal entry of B, seed 004) where
+labelled with their working mode (the sign of each diagonal entry of B, Chablat & Wenger 1998) where
 the mechanism is fully parallel.
 """
 

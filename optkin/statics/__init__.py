@@ -2,8 +2,8 @@
 
 The static model (:func:`static_model`) follows from the principle of virtual work on the
 velocity constraint A t + B qa_dot + P qp_dot = 0 (Chablat and Wenger's A t + B qa_dot = 0
-for platforms, seed 004; the closure [7.49] for Khalil tables, seed 000; Modern Robotics
-7.2): F = A^T lambda, tau = -B^T lambda, P^T lambda = 0, where F is the wrench the end
+for platforms, Chablat & Wenger 1998; the closure [7.49] for Khalil tables, Khalil & Dombre
+2002; Lynch & Park 2017, 7.2): F = A^T lambda, tau = -B^T lambda, P^T lambda = 0, where F is the wrench the end
 effector APPLIES to the environment (moments about the end-effector point, base frame) and
 tau the actuator forces; the load resisted is -F. See :mod:`optkin.statics.model`.
 

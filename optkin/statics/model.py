@@ -17,7 +17,7 @@ the remaining unknowns ``qp_dot`` (passive and cut joints):
   t = (vx, vy, wz) = x_dot. Spatial platforms: x = (p, quaternion), and the quaternion
   rate of a base-frame angular velocity w is quat_dot = 1/2 (0, w) * quat, so A = W_p [I 0;
   0 1/2 E(quat)] (the row of the quaternion norm vanishes on these motions and is dropped).
-* every other mechanism (Khalil tables, seed 000, 7.5-7.7; legs in chain form): the task
+* every other mechanism (Khalil tables, Khalil & Dombre 2002, sec. 7.5-7.7; legs in chain form): the task
   rows t - J_a qa_dot - J_x x_dot = 0 (J the twist Jacobian of the end-effector frame)
   stacked over the closure W_a qa_dot + W_p x_dot = 0 [7.49], i.e. A = [I; 0],
   B = [-J_a; W_a], P = [-J_x; W_p].
