@@ -20,8 +20,9 @@ sys.path.insert(0, str(HERE.parent))
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
-import optkin  # noqa: E402
 from _schema_page import write_schema_page  # noqa: E402
+
+import optkin  # noqa: E402
 
 project = "optkin"
 author = "the optkin developers"
@@ -63,6 +64,7 @@ napoleon_custom_sections = [
     ("Measured", "notes_style"),
     ("Raises", "raises_style"),
 ]
+templates_path = ["_templates"]
 nitpicky = False
 suppress_warnings = ["myst.xref_missing"]
 

@@ -184,13 +184,13 @@ def rrr3(
 def five_bar(L0: float, L1: float, L2: float, L3: float, L4: float) -> Mechanism:
     """The RR-RRR five-bar of Chablat and Wenger 1998.
 
-    Base joints A = (0, 0) and B = (L0, 0); |AC| = L1, |CP| = L2, |PD| = L3, |DB| = L4;
+    Base joints A = (0, 0) and B = (L0, 0); ``|AC|`` = L1, ``|CP|`` = L2, ``|PD|`` = L3, ``|DB|`` = L4;
     q_a = (theta1 at A, theta2 at B), angles from the x axis; the end effector is P.
 
     Parameters
     ----------
     L0, L1, L2, L3, L4 : float
-        Positive lengths |AB|, |AC|, |CP|, |PD|, |DB|.
+        Positive lengths ``|AB|``, ``|AC|``, ``|CP|``, ``|PD|``, ``|DB|``.
 
     Returns
     -------

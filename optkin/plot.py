@@ -118,6 +118,8 @@ def draw(
     dpi : float
         Resolution of the written file (default :data:`DPI`).
 
+    Notes
+    -----
     In each panel the legs are drawn from their fixed joints (black triangles) to the
     platform, whose polygon is closed and shaded (planar) or outlined (spatial); a Khalil
     table's links join each frame to its antecedent. Axes are equal in every direction and

@@ -149,7 +149,7 @@ class KinResult:
     success, status, message :
         Whether the closure is satisfied to tolerance; one of :data:`STATUS`; a sentence.
     residual : float
-        max |Phi| at the returned configuration.
+        max ``|Phi|`` at the returned configuration.
     nit : int
         Iterations used.
     posture : tuple or None

@@ -610,7 +610,7 @@ def workspace(
 
     Examples
     --------
-    Two annuli 3 <= r <= 13 about A and B, |AB| = 9 (exactly 245.1414):
+    Two annuli 3 <= r <= 13 about A and B, ``|AB|`` = 9 (exactly 245.1414):
 
     >>> import optkin
     >>> round(optkin.workspace(optkin.mechanisms.five_bar(9, 8, 5, 5, 8)).area, 1)

@@ -139,7 +139,7 @@ class _Functions:
         """The first :data:`CORRECTOR_STEPS` Newton steps of the tracer's corrector (its
         :meth:`_Tracer.correct`) in one Function, the graph built on first use: from the
         prediction ``u`` (scaled), Newton on [G; t.(u - a)] = 0; each step taken only while
-        the point has not converged (max |G| < tol and |t.(u - a)| < 1e-10) and while the
+        the point has not converged (max ``|G|`` < tol and ``|t.(u - a)|`` < 1e-10) and while the
         steps stay finite and within ``cap``. Outputs: the point, ``done`` (converged; the
         step count ``k`` at which it did and J there), ``failed`` (a step not finite or
         longer than cap). Neither: the caller goes on from the point in Python."""
@@ -330,7 +330,7 @@ class Curve:
     points : ndarray (N, 2)
         The points in the plane.
     residual : ndarray (N,)
-        max |G| at every point (the closure rows and the singularity condition).
+        max ``|G|`` at every point (the closure rows and the singularity condition).
     closed : bool
         The curve closes on itself (angles modulo 2 pi).
     ends : tuple of str
@@ -1125,7 +1125,7 @@ def singular_curves(
         Largest continuation step in scaled units (lengths / mechanism size, radians);
         default :data:`DEFAULT_STEP`.
     tol : float
-        Corrector tolerance on max |G|.
+        Corrector tolerance on max ``|G|``.
     max_steps : int, optional
         Largest number of continuation steps each way along one curve (default 20000,
         lowered to what the memory budget allows when not given).
@@ -1154,7 +1154,7 @@ def singular_curves(
     Examples
     --------
     The five-bar of Chablat and Wenger: in its joint space, C, P and D aligned with
-    |CD| = L2 + L3 (one curve) or C = D (two curves that project to two points).
+    ``|CD|`` = L2 + L3 (one curve) or C = D (two curves that project to two points).
 
     >>> import optkin
     >>> m = optkin.mechanisms.five_bar(9, 8, 5, 5, 8)

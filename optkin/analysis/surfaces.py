@@ -46,7 +46,7 @@ class SingularSurface:
     triangles : ndarray (T, 3) of int
         Vertex indices.
     residual : ndarray (V,)
-        max |[Phi; det W_p]| at each vertex (from the continuation's corrector).
+        max ``|[Phi; det W_p]|`` at each vertex (from the continuation's corrector).
     sections : ndarray
         The values of the third coordinate the curves were traced at.
     open_curves : int

@@ -207,7 +207,7 @@ class Mechanism:
             direct model then solves the overdetermined closure in the least-squares sense
             (Gauss-Newton), and the leg lengths must be consistent for it to close.
         reduced : bool
-            Distance legs (RPR, RRR, UPS, RUS, ...) as one row |P - C(q_a)| = l each
+            Distance legs (RPR, RRR, UPS, RUS, ...) as one row ``|P - C(q_a)|`` = l each
             (default); False: every leg in its chain form (the joint-level closure), which
             gives the same configurations.
         """

@@ -110,9 +110,9 @@ class BatchResult:
     qa : ndarray (n, na)
         The active joint values, as given.
     success : ndarray of bool (n,)
-        Whether max |Phi| <= tol at each row.
+        Whether max ``|Phi|`` <= tol at each row.
     residual : ndarray (n,)
-        max |Phi| at each row.
+        max ``|Phi|`` at each row.
     nit : ndarray of int (n,)
         Newton iterations (corrections) spent on each row.
     status, message : str
@@ -126,7 +126,7 @@ class BatchResult:
         guard; always +1 when W_p has more rows than columns).
     conditioning : ndarray (n,)
         A cheap conditioning indicator of W_p at each closed row, in [0, 1]: the Hadamard
-        ratio |det(W_p S)| / prod_i |row_i(W_p S)| with the columns scaled by the
+        ratio ``|det(W_p S)|`` / prod_i ``|row_i(W_p S)|`` with the columns scaled by the
         mechanism's size (S = diag(x_scale)); 1 for orthogonal rows, 0 at a parallel
         singularity; NaN at rows that did not close. It bounds the smallest singular value
         s of the row-normalised matrix: s^n <= conditioning <= s n^((n-1)/2).
@@ -286,6 +286,8 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
         :data:`optkin.limits.MAX_ITERATIONS`, ``threads`` at most
         :data:`optkin.limits.MAX_THREADS`.
 
+    Notes
+    -----
     Memory and time: each row of ``QA`` costs about 300 + 100 (nx + na) bytes (solution,
     checks and JSON; 750 bytes measured for a five-bar) and each column of a compiled call
     (``chunk``) about 100 (nx + na) + 180 np bytes (np entries of the geometry vector, an

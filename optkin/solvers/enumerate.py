@@ -6,7 +6,7 @@ over the unknowns, drawn as the model says what each unknown is
 (:mod:`optkin.model.enumeration`): joint angles over [-pi, pi) for Khalil mechanisms; for
 platforms SO(2) angles or uniform unit quaternions (Shoemake's map of Sobol points) and
 positions in the box where every leg can still close (each leg confines the platform to a
-ball: a distance leg |P - C(q_a)| = r puts its platform point in the ball of radius r about
+ball: a distance leg ``|P - C(q_a)|`` = r puts its platform point in the ball of radius r about
 C, a chain of joints is followed from its end to its base, every passive revolute growing
 the ball by the distance of its centre from the axis); the variables of legs written as
 chains (``Leg.from_screws``, UPU, RPS, PSP, ...) are drawn from the sampled pose, each leg
@@ -30,7 +30,7 @@ an input, so a new geometry of a known topology compiles nothing). Above
 and compiled, and the linear solves are done by numpy. Converged columns are
 deduplicated as they arrive (angles modulo 2 pi, quaternion sign, a tolerance relative to
 the mechanism size) and replaced by fresh starts. Exclusion rather than deflation: a start
-that enters the quadratic-convergence region of a known solution (|Phi| < 1e-5 L, within
+that enters the quadratic-convergence region of a known solution (``|Phi|`` < 1e-5 L, within
 1e-3 scaled) is counted as its hit and replaced, which saves iterations without biasing the
 hit counts (deflating known solutions would change the basins and with them the meaning of
 the Good-Turing estimate).
@@ -1395,6 +1395,8 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
         See :data:`TRACK_DEFAULTS`. ``min_step`` is at least :data:`MIN_STEP`, ``max_iter``
         at most :data:`optkin.limits.MAX_ITERATIONS`.
 
+    Notes
+    -----
     Memory and time: each path point costs about 6000 + 150 (nq + nx) bytes (its
     KinResult and JSON; 6.2 KB measured for a five-bar), checked against the memory budget
     of :mod:`optkin.limits` before tracking (``len(qa_path)``). When the time budget runs
@@ -1594,7 +1596,7 @@ class WorkingModes:
         (:meth:`optkin.model.Model.working_modes`: +1 before -1, the first leg slowest): 2
         signs for a leg whose actuated joint moves the centre of its distance constraint
         (RRR, RUS, RSS, PRR: elbow up or down), 1 for a leg whose actuated joint is the
-        distance (B_jj = -1 for f_j = |P_j - A_j| - rho_j).
+        distance (B_jj = -1 for f_j = ``|P_j - A_j|`` - rho_j).
     legs : list of str
         The leg types (or joint strings of chains).
     pose : ndarray or None

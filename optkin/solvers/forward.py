@@ -32,7 +32,7 @@ MAX_ITER = 10_000
 def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinResult:
     """Direct geometric model: the closed configuration for active joint values ``qa``.
 
-    The closure Phi(q_a, x) = 0 is posed as the NLP  min |x - x_guess|^2  s.t.  Phi = 0
+    The closure Phi(q_a, x) = 0 is posed as the NLP  min ``|x - x_guess|^2``  s.t.  Phi = 0
     and solved with IPOPT (the solver is built once per mechanism and reused, q_a and the
     guess being its parameters), so the guess selects the assembly mode nearest to it. With
     ``method="auto"`` (default) a clamped Newton iteration from the guess (Khalil & Dombre 2002, sec. 7.9) is

@@ -102,7 +102,7 @@ def _pow2(*arrays: np.ndarray) -> float:
 
 def limits_of(limits: Any, sm: StaticModel, required: bool = True
               ) -> tuple[np.ndarray, np.ndarray] | None:
-    """(lo, hi) from a scalar, one bound per actuator (|tau_i| <= b_i) or pairs (lo_i, hi_i)."""
+    """(lo, hi) from a scalar, one bound per actuator (``|tau_i|`` <= b_i) or pairs (lo_i, hi_i)."""
     na, names = sm.na, list(sm.actuator_names)
     if limits is None:
         if required:
@@ -326,7 +326,7 @@ def capability(
     q : array or KinResult
         The configuration (``KinResult.q``, all joints) or the KinResult.
     limits : float, array (na,) or array (na, 2)
-        |tau_i| <= limits_i, or pairs (lo_i, hi_i) with lo_i <= 0 <= hi_i.
+        ``|tau_i|`` <= limits_i, or pairs (lo_i, hi_i) with lo_i <= 0 <= hi_i.
     directions : array (k, m), list of component names, or None
         Wrench directions in the task space (normalised here): planar (fx, fy, mz), spatial
         (fx, fy, fz, mx, my, mz), base frame, moments about the end-effector point. Names

@@ -189,7 +189,7 @@ class DistributionResult(_Result):
     """Actuator forces producing a wrench, with the smallest 2-norm or largest entry.
 
     ``tau`` the actuator forces (nan when infeasible), ``multipliers`` the constraint
-    forces lambda (leg forces), ``wrench`` the requested F, ``residual`` max |G tau - F|
+    forces lambda (leg forces), ``wrench`` the requested F, ``residual`` max ``|G tau - F|``
     recomputed from the static model, ``utilisation`` tau_i / limit_i (signed side).
     """
 
