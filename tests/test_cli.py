@@ -365,6 +365,8 @@ def test_progress_bar_on_a_terminal(small: Path, tmp_path: Path) -> None:
     assert os.waitstatus_to_exitcode(status) == 0, text
     # the tqdm bar, drawn at least once (a fast run may end before it redraws at 2/2)
     assert re.search(r"[0-2]/2 \[", text) and "problem" in text, text
+    # the bar names the problem in flight (the worker protocol reports each start)
+    assert re.search(r"problem.*(rpr3|four_bar)\.toml", text), text
     assert "4/4 task(s) passed" in text
 
 

@@ -731,7 +731,7 @@ def run_paths(
     dies fails only that task: the problem's other tasks and the other problems go on.
     Problems whose complete result exists with the same input hash are skipped unless
     ``force``. ``progress(total)`` returns a progress object with ``update()``/``close()``
-    (e.g. a tqdm bar).
+    (e.g. a tqdm bar); with ``set_postfix_str`` too, it is told the problems in flight.
     """
     out = Path(out)
     report = RunReport()
@@ -759,8 +759,24 @@ def run_paths(
     for u in units:
         n_units[u.spec["display"]] = n_units.get(u.spec["display"], 0) + 1
 
+    in_flight: dict[str, int] = {}  # problem -> its units running, named on the bar
+
+    def show_in_flight() -> None:
+        if bar is not None and hasattr(bar, "set_postfix_str"):
+            names = sorted(k for k, v in in_flight.items() if v > 0)
+            text = ", ".join(names)
+            bar.set_postfix_str(text if len(text) <= 60 else text[:57] + "...", refresh=True)
+
+    def started(job: Job) -> None:
+        name = job.key.split("#", 1)[0]
+        in_flight[name] = in_flight.get(name, 0) + 1
+        show_in_flight()
+
     def done(o: JobOutcome) -> None:
         name = o.key.split("#", 1)[0]
+        if in_flight.get(name, 0) > 0:
+            in_flight[name] -= 1
+            show_in_flight()
         got = pending.setdefault(name, [])
         got.append(o)
         if len(got) < n_units[name]:
@@ -788,7 +804,7 @@ def run_paths(
             _run_dask(scheduler, units, time_limit, done)
         else:
             run_jobs(units, n_workers=jobs, time_limit=time_limit, on_outcome=done,
-                     threads=1 if jobs > 1 else None)
+                     threads=1 if jobs > 1 else None, on_start=started)
     finally:
         if bar is not None:
             bar.close()

@@ -487,13 +487,15 @@ def run_jobs(
     on_outcome: Callable[[JobOutcome], None] | None = None,
     threads: int | None = None,
     keep: int | None = None,
+    on_start: Callable[[Job], None] | None = None,
 ) -> list[JobOutcome]:
     """Run ``jobs`` on up to ``n_workers`` worker processes; return their outcomes.
 
     ``time_limit`` bounds loading each problem (its tasks bring their own limits, the
     worker falling back to the run's default). A task past its limit, or a worker that
     dies, becomes an ``error`` record of that task; the problem goes on in a new worker.
-    ``on_outcome`` is called as each job ends (in the calling thread). Afterwards up to
+    ``on_start`` is called as a job is handed to a worker, ``on_outcome`` as each job ends
+    (both in the calling thread). Afterwards up to
     ``keep`` (default ``n_workers``) workers stay idle for the next call in this process.
     """
     pending = _Pending(jobs)
@@ -522,6 +524,8 @@ def run_jobs(
             pending.appendleft(job)
             w.job = w.deadline = None
             w.dead = True
+        elif on_start is not None:
+            on_start(job)
 
     start_failures = []
 
