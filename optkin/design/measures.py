@@ -60,7 +60,7 @@ _REASON = {0: "none", REACH: "serial", PARALLEL: "parallel", LIMIT: "limit",
 # --------------------------------------------------------------------------- regions
 @dataclass(frozen=True)
 class Disc:
-    """The disc ``|P - centre|`` <= radius of the task plane."""
+    """The disc of the task plane about ``centre``: the points P with distance to it <= radius."""
 
     centre: tuple[float, float]
     radius: float
