@@ -4,13 +4,13 @@ The vocabulary follows scipy's ``OptimizeResult`` (``x``, ``success``, ``status`
 ``message``, ``nit``) plus the kinematic fields, like cvxpy's ``SolverStats`` for the
 solver side.
 
-Statuses
---------
 Every public result of optkin (:class:`KinResult`, :class:`SolutionSet`, the analyses'
 and the statics' results, :class:`optkin.design.DesignResult`, ...) has
 
-* ``success`` (bool): the call answered its question (an answer may be "no": a pose out of
-  reach, a wrench set that is not feasible);
+* ``success`` (bool): the call found what it was asked for; an answer "no" can be one
+  (:func:`optkin.statics.feasible` answering that a wrench set is not feasible), while a
+  solve without a solution is not (a pose out of reach: ``success=False``, status
+  ``"infeasible"``);
 * ``status``: one word of :data:`STATUS`, the constants below, in the manner of cvxpy's
   ``cvxpy/settings.py``; the groups (:data:`SOLUTION_PRESENT`, :data:`INF_OR_UNB`,
   :data:`LIMIT_REACHED`, :data:`FAILURE`, :data:`ANSWERED`) say what a status means for

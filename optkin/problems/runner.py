@@ -6,9 +6,7 @@ process pools and Dask workers (problem bytes in; result dict and PNG bytes out)
 :func:`run_paths` finds problem files, skips those already done (resume), fans the
 rest out, and writes every file atomically.
 
-Task outcomes
--------------
-The ``status`` of a task in the result JSON and in ``summary.csv`` is the runner's word
+Task outcomes: the ``status`` of a task in the result JSON and in ``summary.csv`` is the runner's word
 for how the task went (:data:`TASK_OUTCOMES`), not a result's status: ``ok`` (the analysis
 ran and its result says ``success``), ``failed`` (it ran and its result says
 ``success=False``; the message is the result's), ``error`` (an exception, a worker that
