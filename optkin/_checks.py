@@ -10,6 +10,11 @@ Numeric kernels (LAPACK through numpy) must never receive NaN or inf: some LAPAC
 loop forever on them (``DLASCL parameter number 4 had an illegal value``).
 :func:`finite_matrix` is the guard to put in front of them; the finite-checked linear
 algebra helpers live in :mod:`optkin.numeric`.
+
+The checks every public function shares live here too: :func:`check_mechanism` (the one
+"expected an optkin Mechanism" message), :func:`check_number` (a number or integer within
+bounds: the one validator of numeric arguments) and :func:`check_option` (the same for an
+option of a ``*_DEFAULTS`` mapping, whose message names the option and its default).
 """
 
 from __future__ import annotations
@@ -29,6 +34,9 @@ __all__ = [
     "as_int",
     "as_vector",
     "as_matrix",
+    "check_mechanism",
+    "check_number",
+    "check_option",
     "finite_matrix",
     "show",
 ]
@@ -243,3 +251,144 @@ def finite_matrix(a: np.ndarray) -> bool:
     False
     """
     return bool(np.isfinite(a).all())
+
+
+# ------------------------------------------------------------------ shared argument checks
+
+def check_mechanism(mech: Any, where: str | None = None) -> None:
+    """Raise a MechanismError unless ``mech`` is an optkin Mechanism.
+
+    ``where`` (the function, or the argument) starts the message.
+
+    >>> check_mechanism("five_bar", "forward")
+    Traceback (most recent call last):
+    ...
+    optkin.errors.MechanismError: forward: expected an optkin Mechanism, got str; build one with optkin.mechanisms.* or Mechanism.from_khalil / from_legs
+    """
+    from .mechanism import Mechanism
+
+    if not isinstance(mech, Mechanism):
+        head = f"{where}: " if where else ""
+        raise MechanismError(
+            f"{head}expected an optkin Mechanism, got {type(mech).__name__}; build one with "
+            "optkin.mechanisms.* or Mechanism.from_khalil / from_legs")
+
+
+_UNSET: Any = object()
+
+
+def _nonfinite(v: Any) -> bool:
+    """NaN or +-inf (a float of any kind)."""
+    return isinstance(v, (float, np.floating)) and not math.isfinite(float(v))
+
+
+def _bound(x: float, integer: bool) -> str:
+    return str(int(x)) if integer and float(x).is_integer() else f"{x:g}"
+
+
+def check_number(v: Any, where: str, *, integer: bool = False, lo: float | None = None,
+                 hi: float | None = None, lo_open: bool = False, hi_open: bool = False,
+                 finite: bool = True, optional: bool = False, default: Any = _UNSET,
+                 want: str | None = None, error: type[Exception] = MechanismError,
+                 path: Path = ()) -> Any:
+    """``v`` as a float (an int with ``integer``) within the bounds, else ``error``.
+
+    The one validator of numeric arguments and options: it never lets a TypeError or an
+    OverflowError through, and its message names the argument (``where``), what it must
+    be and what was given.
+
+    Parameters
+    ----------
+    v : any
+        The value given.
+    where : str
+        The argument, e.g. ``"grid"`` or ``"dof: samples"`` (or ``"forward: option tol"``).
+    integer : bool
+        A whole number (integral floats such as ``4.0`` accepted; booleans never).
+    lo, hi : float, optional
+        Bounds, inclusive unless ``lo_open`` / ``hi_open``.
+    finite : bool
+        False also accepts +-inf (e.g. a limit that inf disables); NaN never.
+    optional : bool
+        None is accepted (and returned).
+    default : optional
+        The argument's default: the message then reads ``"{where} must be ... (default
+        d), got v"`` (the style of options); without it, ``"{where}: expected ..., got v"``.
+    want : str, optional
+        What the value must be, in words, where the bounds do not say it (``"a positive
+        length"``); default: the kind and the bounds (``"an integer >= 1 and <= 100"``).
+    error : exception class
+        Raised (MechanismError; StaticsError for the statics).
+    path : sequence
+        The argument's location (``OptkinError.path``), e.g. ``("options", "tol")``.
+
+    Returns
+    -------
+    float or int or None
+
+    Examples
+    --------
+    >>> check_number(4.0, "grid", integer=True, lo=2)
+    4
+    >>> check_number(0, "step", lo=0, lo_open=True)
+    Traceback (most recent call last):
+    ...
+    optkin.errors.MechanismError: step: expected a number > 0, got 0
+    >>> check_number(-1, "forward: option tol", lo=0, default=1e-10)
+    Traceback (most recent call last):
+    ...
+    optkin.errors.MechanismError: forward: option tol must be a number >= 0 (default 1e-10), got -1
+    """
+    if v is None and optional:
+        return None
+    why = ""  # what the conversion found wrong, when it is more than the bounds say
+    try:
+        x: Any = as_int(v, where) if integer else as_float(v, where, finite=finite)
+        ok = integer or math.isfinite(x) or not finite
+        if not integer and math.isfinite(x) and abs(x) > MAX_ABS:
+            ok, why = False, f"magnitude above {MAX_ABS:g}"
+    except MechanismError as e:
+        x, ok = None, False
+        if "too large" in str(e):
+            why = str(e)[len(where) + 2:]
+    if ok and lo is not None and (x <= lo if lo_open else x < lo):
+        ok = False
+    if ok and hi is not None and (x >= hi if hi_open else x > hi):
+        ok = False
+    if ok:
+        return x
+    if want is None:
+        kind = "an integer" if integer else "a number"
+        if finite and not integer and _nonfinite(v):
+            kind = "a finite number"
+        parts = []
+        if lo is not None and math.isfinite(lo):
+            parts.append(f"{'>' if lo_open else '>='} {_bound(lo, integer)}")
+        if hi is not None and math.isfinite(hi):
+            parts.append(f"{'<' if hi_open else '<='} {_bound(hi, integer)}")
+        want = kind + (" " + " and ".join(parts) if parts else "")
+    if default is _UNSET:
+        msg = f"{where}: expected {want}, got {_show(v)}"
+    else:
+        msg = f"{where} must be {want} (default {default!r}), got {_show(v)}"
+    if why:
+        msg += f" ({why})"
+    try:
+        exc = error(msg, path=tuple(path))  # type: ignore[call-arg]
+    except TypeError:  # an error class without a path
+        exc = error(msg)
+    raise exc
+
+
+def check_option(opts: Any, name: str, where: str, defaults: Any, **bounds: Any) -> Any:
+    """``opts[name]`` through :func:`check_number`, as the option ``name`` of the function
+    ``where`` whose defaults are ``defaults`` (the message gives the default; the error's
+    path is ``("options", name)``).
+
+    >>> check_option({"starts": 0}, "starts", "inverse", {"starts": 256}, integer=True, lo=1)
+    Traceback (most recent call last):
+    ...
+    optkin.errors.MechanismError: inverse: option starts must be an integer >= 1 (default 256), got 0
+    """
+    return check_number(opts[name], f"{where}: option {name}", default=defaults[name],
+                        path=("options", name), **bounds)

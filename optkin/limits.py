@@ -19,9 +19,8 @@ TIME_BUDGET : float
     Seconds a call without a ``time_limit`` option of its own may spend in its loops
     (continuation, path tracking, batch fallbacks, map sampling): 600 s by default,
     ``OPTKIN_TIME_BUDGET`` overrides it. When it runs out the call returns what it has with
-    ``success=False`` and status ``"time_limit"`` (``"iteration_limit"`` for
-    :func:`optkin.track` and :func:`optkin.forward_batch`, whose statuses are those of
-    :data:`optkin.results.STATUS`); the ``time_limit`` option of
+    ``success=False`` and status ``"time_limit"`` (:data:`optkin.results.TIME_LIMIT`;
+    ``"memory_limit"`` when tracing stops at the memory budget); the ``time_limit`` option of
     :func:`optkin.assembly_modes` defaults to at most the budget and may not exceed it.
     A single native call (one mapped CasADi evaluation, one IPOPT solve) is not
     interrupted, but its size is bounded by the memory budget.

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from ._checks import as_float, as_matrix, as_vector
+from ._checks import as_float, as_matrix, as_vector, check_number
 from ._checks import show as _show
 from .errors import MechanismError
 from .mechanism import Leg, Mechanism
@@ -56,13 +56,7 @@ def _lengths(v: Any, n: int, name: str) -> np.ndarray:
 
 
 def _positive(name: str, v: Any) -> float:
-    try:
-        f = as_float(v, name, path=(name,))
-    except MechanismError:
-        f = -1.0
-    if f <= 0:
-        raise MechanismError(f"{name}: expected a positive length, got {_show(v)}", path=(name,))
-    return f
+    return check_number(v, name, lo=0.0, lo_open=True, want="a positive length", path=(name,))
 
 
 def _finite(name: str, v: Any) -> float:

@@ -260,10 +260,10 @@ def animate(
         if suffix not in (".gif", ".mp4"):
             raise MechanismError(f"path: expected a .gif or .mp4 file name, got "
                                  f"{os.fspath(path)!r}; give the animation one of those suffixes")
-    if hasattr(motion, "result") and hasattr(motion, "qa") and hasattr(motion, "success"):
-        ok = np.flatnonzero(np.asarray(motion.success, dtype=bool))
+    if hasattr(motion, "result") and hasattr(motion, "qa") and hasattr(motion, "closed"):
+        ok = np.flatnonzero(np.asarray(motion.closed, dtype=bool))
         rs: list[Any] = [motion.result(int(i)) for i in ok]
-        n_all = len(motion.success)
+        n_all = len(motion.closed)
     elif isinstance(motion, KinResult):
         rs, n_all = [motion], 1
     elif isinstance(motion, (str, bytes)) or not hasattr(motion, "__iter__"):

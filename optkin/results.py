@@ -3,20 +3,89 @@
 The vocabulary follows scipy's ``OptimizeResult`` (``x``, ``success``, ``status``,
 ``message``, ``nit``) plus the kinematic fields, like cvxpy's ``SolverStats`` for the
 solver side.
+
+Every public result of optkin (:class:`KinResult`, :class:`SolutionSet`, the analyses'
+and the statics' results, :class:`optkin.design.DesignResult`, ...) has
+
+* ``success`` (bool): the call found what it was asked for; an answer "no" can be one
+  (:func:`optkin.statics.feasible` answering that a wrench set is not feasible), while a
+  solve without a solution is not (a pose out of reach: ``success=False``, status
+  ``"infeasible"``);
+* ``status``: one word of :data:`STATUS`, the constants below, in the manner of cvxpy's
+  ``cvxpy/settings.py``; the groups (:data:`SOLUTION_PRESENT`, :data:`INF_OR_UNB`,
+  :data:`LIMIT_REACHED`, :data:`FAILURE`, :data:`ANSWERED`) say what a status means for
+  the caller;
+* ``message`` (str): one or two sentences, never empty;
+* ``to_dict()``: JSON data (:func:`jsonable`: NaN and inf become None), which
+  ``json.dumps(..., allow_nan=False)`` accepts.
+
+A solver's own word (IPOPT's ``return_status``, cvxpy's ``problem.status``) goes to
+``stats.raw_status`` (:class:`SolverStats`) where the result keeps solver statistics.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+import dataclasses
+import math
+import os
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-__all__ = ["KinResult", "SolutionSet", "SolverStats", "STATUS", "ipopt_status"]
+__all__ = [
+    "KinResult", "SolutionSet", "SolverStats", "EnumerationStats", "STATUS",
+    "OPTIMAL", "INACCURATE", "INFEASIBLE", "UNBOUNDED", "SINGULAR", "ITERATION_LIMIT",
+    "TIME_LIMIT", "MEMORY_LIMIT", "ERROR", "SOLUTION_PRESENT", "INF_OR_UNB", "LIMIT_REACHED",
+    "FAILURE", "ANSWERED", "RESULT_ATTRIBUTES", "ipopt_status", "jsonable",
+]
 
-#: The handful of statuses every result uses.
-STATUS = ("optimal", "inaccurate", "infeasible", "iteration_limit", "singular", "error")
+# --------------------------------------------------------------------------- statuses
+#: The answer was computed, to the tolerance asked for.
+OPTIMAL = "optimal"
+#: An answer was computed, short of the tolerance (a solver's "acceptable" level) or
+#: incomplete in a way the message states (some curves short of the residual, ...).
+INACCURATE = "inaccurate"
+#: The problem has no solution, or none was found: a pose out of reach, active joint
+#: values no configuration closes, an infeasible LP, two modes no path joins.
+INFEASIBLE = "infeasible"
+#: An LP of the statics is unbounded (a wrench carried without actuator force).
+UNBOUNDED = "unbounded"
+#: At (or through) a singularity: values valid where the message says so (statics at a
+#: parallel singularity), or a path stopped where det W_p changes sign.
+SINGULAR = "singular"
+#: Stopped at an iteration cap (IPOPT's ``max_iter``, a Newton budget, steps of a path).
+ITERATION_LIMIT = "iteration_limit"
+#: Stopped at a time limit: a ``time_limit`` option, or the time budget of
+#: :mod:`optkin.limits` (``OPTKIN_TIME_BUDGET``); what was found so far is returned.
+TIME_LIMIT = "time_limit"
+#: Stopped at the memory budget of :mod:`optkin.limits` (``OPTKIN_MEMORY_BUDGET``) while
+#: tracing; what was found so far is returned.
+MEMORY_LIMIT = "memory_limit"
+#: A numerical or solver failure (non-finite values, a solver error, an undefined model).
+ERROR = "error"
+
+#: Every status a public result may carry.
+STATUS = (OPTIMAL, INACCURATE, INFEASIBLE, UNBOUNDED, SINGULAR, ITERATION_LIMIT, TIME_LIMIT,
+          MEMORY_LIMIT, ERROR)
+
+#: An answer is present (cvxpy's ``SOLUTION_PRESENT``).
+SOLUTION_PRESENT = (OPTIMAL, INACCURATE)
+#: No solution: infeasible or unbounded (cvxpy's ``INF_OR_UNB``).
+INF_OR_UNB = (INFEASIBLE, UNBOUNDED)
+#: Stopped by a budget before the end: the result is partial and ``success`` is False.
+LIMIT_REACHED = (ITERATION_LIMIT, TIME_LIMIT, MEMORY_LIMIT)
+#: A failure: ``success`` is False.
+FAILURE = (ERROR,)
+#: The statuses a successful result may carry: an answer, possibly "no solution" or "at
+#: a singularity" (e.g. ``feasible(...)`` answers ``feasible=False`` with success).
+#: ``success=True`` never comes with a status of :data:`LIMIT_REACHED` or
+#: :data:`FAILURE`, and ``status == OPTIMAL`` always comes with ``success=True``.
+ANSWERED = SOLUTION_PRESENT + INF_OR_UNB + (SINGULAR,)
+
+#: What every public result type has: ``success``, ``status``, ``message`` and ``to_dict``.
+RESULT_ATTRIBUTES = ("success", "status", "message", "to_dict")
 
 _IPOPT_STATUS_MAP = {
     "Solve_Succeeded": "optimal",
@@ -25,8 +94,8 @@ _IPOPT_STATUS_MAP = {
     "Restoration_Failed": "infeasible",
     "Local_Infeasibility": "infeasible",
     "Maximum_Iterations_Exceeded": "iteration_limit",
-    "Maximum_CpuTime_Exceeded": "iteration_limit",
-    "Maximum_WallTime_Exceeded": "iteration_limit",
+    "Maximum_CpuTime_Exceeded": "time_limit",
+    "Maximum_WallTime_Exceeded": "time_limit",
     "Search_Direction_Becomes_Too_Small": "inaccurate",
     "Diverging_Iterates": "error",
     "Error_In_Step_Computation": "error",
@@ -42,18 +111,62 @@ def ipopt_status(raw: str) -> str:
     return _IPOPT_STATUS_MAP.get(raw, "error")
 
 
-def _jsonable(v: Any) -> Any:
+def jsonable(v: Any, *, keep_nonfinite: bool = False) -> Any:
+    """``v`` as JSON data: the one converter of optkin's ``to_dict`` methods and files.
+
+    Numpy arrays and scalars become lists and Python numbers, mappings dicts with string
+    keys, tuples, lists and sets lists, objects with a ``to_dict`` method (results) and
+    dataclasses their dicts, paths strings; anything else its ``repr``. NaN and +-inf
+    become None (JSON has no such numbers), unless ``keep_nonfinite`` (a description
+    that must round-trip, e.g. unbounded joint limits).
+
+    Parameters
+    ----------
+    v : any
+        The value to convert.
+    keep_nonfinite : bool, optional
+        Keep NaN and +-inf floats as they are (default False: None).
+
+    Returns
+    -------
+    JSON data: dict, list, str, int, float, bool or None.
+
+    Examples
+    --------
+    >>> jsonable({"q": np.array([1.0, np.nan]), 2: (np.int64(3), float("inf"))})
+    {'q': [1.0, None], '2': [3, None]}
+    """
+    if v is None or isinstance(v, (str, bool)):
+        return v
+    if isinstance(v, float):  # before int: also numpy's float64, a float subclass
+        return float(v) if keep_nonfinite or math.isfinite(v) else None
+    if isinstance(v, int):
+        return int(v)
     if isinstance(v, np.ndarray):
-        return _jsonable(v.tolist())  # recurse: NaN and inf entries become None
-    if isinstance(v, (np.floating, np.integer, np.bool_)):
-        return _jsonable(v.item())
-    if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
+        return jsonable(v.tolist(), keep_nonfinite=keep_nonfinite)
+    if isinstance(v, np.generic):
+        return jsonable(v.item(), keep_nonfinite=keep_nonfinite)
+    if hasattr(v, "to_dict") and callable(v.to_dict) and not isinstance(v, type):
+        return jsonable(v.to_dict(), keep_nonfinite=keep_nonfinite)
+    if isinstance(v, Mapping):
+        return {str(k): jsonable(x, keep_nonfinite=keep_nonfinite) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, float) and not np.isfinite(v):
-        return None
-    return v
+        return [jsonable(x, keep_nonfinite=keep_nonfinite) for x in v]
+    if isinstance(v, (set, frozenset)):
+        items = [jsonable(x, keep_nonfinite=keep_nonfinite) for x in v]
+        try:
+            return sorted(items)
+        except TypeError:
+            return items
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):  # its fields, not a deep copy
+        return {f.name: jsonable(getattr(v, f.name), keep_nonfinite=keep_nonfinite)
+                for f in dataclasses.fields(v)}
+    if isinstance(v, os.PathLike):
+        return os.fspath(v)
+    return repr(v)
+
+
+_jsonable = jsonable  # the former private name (same function)
 
 
 def _short_array(a: np.ndarray) -> str:
@@ -64,7 +177,23 @@ def _short_array(a: np.ndarray) -> str:
 
 @dataclass
 class SolverStats:
-    """Which solver ran, how long it took and what it said."""
+    """Which solver ran, how long it took and what it said.
+
+    Attributes
+    ----------
+    solver : str
+        The solver's name (``"ipopt"``, ``"newton"``, ``"CLARABEL"``, ...).
+    setup_time, solve_time : float
+        Seconds spent building and solving.
+    nit : int
+        Iterations.
+    raw_status : str
+        The solver's own word for the outcome (IPOPT's ``return_status``, cvxpy's
+        ``problem.status``); the result's ``status`` is its translation into
+        :data:`STATUS`.
+    extra : dict
+        Anything else the producer records.
+    """
 
     solver: str = ""
     setup_time: float = 0.0
@@ -74,7 +203,8 @@ class SolverStats:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        return _jsonable(
+        """A JSON-ready dict (:func:`jsonable`)."""
+        return jsonable(
             {
                 "solver": self.solver,
                 "setup_time": self.setup_time,
@@ -147,7 +277,8 @@ class KinResult:
     pose : ndarray
         4x4 homogeneous transform of the end effector in the base frame.
     success, status, message :
-        Whether the closure is satisfied to tolerance; one of :data:`STATUS`; a sentence.
+        Whether the closure is satisfied to tolerance; one of :data:`STATUS` (the solver's
+        own word is ``stats.raw_status``); a sentence.
     residual : float
         max ``|Phi|`` at the returned configuration.
     nit : int
@@ -217,8 +348,8 @@ class KinResult:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready dict (NaN and inf become None)."""
-        return _jsonable(
+        """A JSON-ready dict (:func:`jsonable`: NaN and inf become None)."""
+        return jsonable(
             {
                 "success": bool(self.success),
                 "status": self.status,
@@ -247,6 +378,19 @@ class SolutionSet(Sequence):
 
     List-like (``len``, iteration, indexing) with a one-line summary and filters, in the
     spirit of HomotopyContinuation.jl's ``Result``.
+
+    Attributes
+    ----------
+    success, status, message :
+        The outcome of the search, as in every result (``info["success"]``,
+        ``info["status"]`` and ``info["message"]``, which the producers set): ``success``
+        False when nothing was found (status ``"infeasible"``) or the search stopped at a
+        limit (``"time_limit"``, ``"iteration_limit"``), or a path at a singularity
+        (``"singular"``, :func:`optkin.track`).
+    info : dict
+        What the producer adds (starts, converged, method, ...).
+    stats : EnumerationStats or None
+        The account of the search where the producer keeps one.
     """
 
     def __init__(
@@ -271,6 +415,27 @@ class SolutionSet(Sequence):
         self.components = list(components)
         #: The account of the search (:class:`EnumerationStats`) where the producer keeps one
         self.stats = stats
+
+    @property
+    def success(self) -> bool:
+        """``info["success"]`` when the producer set it, else whether any solution exists."""
+        v = self.info.get("success")
+        return bool(v) if v is not None else bool(self._sols)
+
+    @property
+    def status(self) -> str:
+        """``info["status"]`` when the producer set it, else ``"optimal"`` when successful
+        and ``"infeasible"`` otherwise (one of :data:`STATUS`)."""
+        v = self.info.get("status")
+        if v is not None:
+            return str(v)
+        return OPTIMAL if self.success else INFEASIBLE
+
+    @property
+    def message(self) -> str:
+        """``info["message"]`` when the producer set it, else the :meth:`summary`."""
+        v = self.info.get("message")
+        return str(v) if v else self.summary()
 
     @property
     def complete(self) -> bool:
@@ -312,15 +477,10 @@ class SolutionSet(Sequence):
         """The solutions whose condition number of W_p is at most ``max_cond`` (a singular
         one, ``cond = inf``, never is; one whose condition number was not computed, NaN, is
         kept)."""
-        try:
-            max_cond = float(max_cond)
-        except (TypeError, ValueError):
-            max_cond = float("nan")
-        if not max_cond >= 1:  # NaN fails too
-            from .errors import MechanismError
+        from ._checks import check_number
 
-            raise MechanismError(f"max_cond: expected a number >= 1 (a condition number), got "
-                                 f"{max_cond!r}")
+        max_cond = check_number(max_cond, "max_cond", lo=1.0, finite=False,
+                                want="a number >= 1 (a condition number)")
         keep = [s for s in self._sols if not s.cond > max_cond]
         return SolutionSet(keep, self.kind, self.info, self.seed, self.dimension,
                            self.components, self.stats)
@@ -340,15 +500,16 @@ class SolutionSet(Sequence):
         return self._sols[int(np.argmin(d))]
 
     def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready dict; ``success``, ``status`` and ``message`` of ``info`` (when the
-        producer sets them, e.g. assembly_modes, track) are repeated at the top level."""
-        head = {k: self.info[k] for k in ("success", "status", "message") if k in self.info}
-        return _jsonable(
+        """A JSON-ready dict (:func:`jsonable`) with ``success``, ``status`` and
+        ``message`` at the top level (``info`` repeats what the producer set)."""
+        return jsonable(
             {
                 "kind": self.kind,
                 "count": len(self._sols),
                 "seed": self.seed,
-                **head,
+                "success": self.success,
+                "status": self.status,
+                "message": self.message,
                 "info": self.info,
                 "solutions": [s.to_dict() for s in self._sols],
                 **({} if self.stats is None else {"stats": self.stats.to_dict(),

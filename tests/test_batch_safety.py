@@ -171,21 +171,21 @@ def test_rpr3_mode_ending_where_two_modes_merge_is_flagged_at_that_row(n):
         b = optkin.forward_batch(m, QA, guess=start)
         sign0 = np.sign(_det_rpr(SIX_A, SIX_B, start))
         # up to the merge: closed rows, in the start's aspect (closed-form det), unflagged
-        assert b.success[:k_star].all() and not b.crossed[:k_star].any()
+        assert b.closed[:k_star].all() and not b.crossed[:k_star].any()
         assert all(np.sign(_det_rpr(SIX_A, SIX_B, x)) == sign0 for x in b.x[:k_star])
         np.testing.assert_allclose(np.array([_legs_rpr(SIX_A, SIX_B, x) for x in b.x[:k_star]]),
                                    QA[:k_star], atol=1e-9)
         # the first event is at the merge: the row does not close, or is marked crossed
-        event = min(np.flatnonzero(~b.success | b.crossed))
+        event = min(np.flatnonzero(~b.closed | b.crossed))
         assert event == k_star
         assert b.status == "singular", b.message
         assert f"rows {k_star - 1} and {k_star}" in b.message
         # a row marked crossed holds another mode: far from the last row of the tracked one
         for i in np.flatnonzero(b.crossed):
-            assert b.success[i] and _wrap_dist(b.x[i], b.x[k_star - 1]) > 1e-3
+            assert b.closed[i] and _wrap_dist(b.x[i], b.x[k_star - 1]) > 1e-3
         # without the guard the same rows are computed, but nothing is said
         nb = optkin.forward_batch(m, QA, guess=start, guard=False)
-        np.testing.assert_array_equal(nb.x[b.success], b.x[b.success])
+        np.testing.assert_array_equal(nb.x[b.closed], b.x[b.closed])
         assert nb.status != "singular" and not nb.crossed.any()
 
 
@@ -221,14 +221,14 @@ def test_coarse_rpr3_paths_flagged_where_the_reference_continuation_ends(seed):
     b = optkin.forward_batch(m, Q, guess=start)
     ref = _reference_continuation(Q, start)
     diverge = [k for k in range(len(Q))
-               if ref[k] is None or not b.success[k] or _wrap_dist(b.x[k], ref[k]) > 1e-6]
-    events = np.flatnonzero(~b.success | b.crossed)
+               if ref[k] is None or not b.closed[k] or _wrap_dist(b.x[k], ref[k]) > 1e-6]
+    events = np.flatnonzero(~b.closed | b.crossed)
     if not diverge:
         assert b.status == "optimal" and events.size == 0, b.message
     else:
         assert events.size and events[0] == diverge[0], (events, diverge, b.message)
         assert b.status == "singular", b.message
-    closed = np.flatnonzero(b.success)
+    closed = np.flatnonzero(b.closed)
     s = [np.sign(_det_rpr(SIX_A, SIX_B, b.x[k])) for k in closed]
     for j in range(1, len(closed)):
         if s[j] != s[j - 1]:
@@ -252,7 +252,7 @@ def test_five_bar_fold_where_C_D_P_align():
     for P0 in five_bar_reference(L, *QA[0])[0]:
         b = optkin.forward_batch(m, QA, guess=P0)
         side0 = _side(P0, *_fb_CD(L, *QA[0]))
-        assert b.success[:k_star].all() and not b.success[k_star:].any()
+        assert b.closed[:k_star].all() and not b.closed[k_star:].any()
         assert all(_side(P, *_fb_CD(L, *qa)) == side0 for P, qa in zip(b.x[:k_star], QA))
         assert not b.crossed.any()
         assert b.status == "singular" and f"rows {k_star - 1} and {k_star}" in b.message
@@ -349,7 +349,7 @@ def test_path_that_starts_out_of_reach_recovers_when_the_legs_can_close():
     start = optkin.inverse(m, [0.45, 0.35, 0.1])[0]
     QA = np.vstack([[0.01, 0.01, 0.01]] * 3 + [start.qa + 0.001 * k for k in range(40)])
     b = optkin.forward_batch(m, QA)
-    assert not b.success[:3].any() and b.success[3:].all()
+    assert not b.closed[:3].any() and b.closed[3:].all()
     # leg lengths of every solved pose, written out (Modern Robotics 7.1.1), equal the inputs
     for qa, (x, y, phi) in zip(QA[3:], b.x[3:]):
         R = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])

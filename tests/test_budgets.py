@@ -131,7 +131,7 @@ CASES = [
      "r = optkin.singular_curves(m, grid={n}); assert r.success; r.to_dict()",
      "grid", lambda n: n + 1),
     # the smallest step: every curve runs max_steps each way, until the traced points fill
-    # the budget (status memory_budget)
+    # the budget (status memory_limit)
     ("singular_curves-max_steps", 16 * MiB, FIVE_BAR, "optkin.singular_curves(m)",
      "r = optkin.singular_curves(m, max_steps={n}, step=1e-6); r.to_dict()",
      "max_steps", lambda n: n + 1),
@@ -274,7 +274,7 @@ def test_the_time_budget_stops_long_calls(monkeypatch):
     t0 = time.perf_counter()
     r = optkin.track(m, P, [0.9, 2.3])
     assert time.perf_counter() - t0 < 3
-    assert r.info["status"] == "iteration_limit" and r.to_dict()["success"] is False
+    assert r.info["status"] == "time_limit" and r.to_dict()["success"] is False
     assert "time budget of 0.3 s" in r.info["message"]
     fb = M.five_bar(1.0, 1.0, 1.0, 1.0, 1.0)
     optkin.forward_batch(fb, np.c_[np.linspace(1.2, 1.5, 20), np.linspace(1.9, 1.6, 20)])
@@ -282,7 +282,7 @@ def test_the_time_budget_stops_long_calls(monkeypatch):
     t0 = time.perf_counter()
     b = optkin.forward_batch(fb, Q)
     assert time.perf_counter() - t0 < 5
-    assert b.status == "iteration_limit" and "time budget" in b.message
+    assert b.status == "time_limit" and "time budget" in b.message
     assert b.stats.extra["stopped_at"] < 20000
     five = M.five_bar(9, 8, 5, 5, 8)
     optkin.singular_curves(five)
@@ -302,7 +302,7 @@ def test_the_time_budget_stops_long_calls(monkeypatch):
 def test_traced_points_stop_at_the_memory_budget(monkeypatch):
     monkeypatch.setenv("OPTKIN_MEMORY_BUDGET", "8MiB")
     r = optkin.singular_curves(M.five_bar(9, 8, 5, 5, 8), step=1e-4)
-    assert not r.success and r.status == "memory_budget"
+    assert not r.success and r.status == "memory_limit"
     assert "the most the memory budget allows" in r.message
 
 

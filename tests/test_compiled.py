@@ -295,7 +295,7 @@ def test_forward_batch_reports_unreachable_rows(cache):
     QA = QA.copy()
     QA[20] = [0.01, 5.0, 0.01]  # the legs cannot close
     br = optkin.forward_batch(mech, QA, guess=Xtrue[0], chunk=16)
-    assert not br.success[20] and br.success.sum() == 39
+    assert not br.closed[20] and br.closed.sum() == 39 and br.success is False
     assert br.status == "infeasible" and "row 20" in br.message
     np.testing.assert_allclose(br.x[21:, :2], Xtrue[21:, :2], atol=1e-8)
 

@@ -114,7 +114,7 @@ def test_bad_arguments(rpr):
         mode_change_path(rpr, QA, 1, 1)
     with pytest.raises(optkin.MechanismError, match="qa must be 3 finite numbers"):
         mode_change_path(rpr, [1.0, 2.0], 0, 1)
-    with pytest.raises(optkin.MechanismError, match="depth must be a positive integer"):
+    with pytest.raises(optkin.MechanismError, match="depth must be an integer >= 1"):
         mode_change_path(rpr, QA, 1, 2, depth=0)
     with pytest.raises(optkin.MechanismError, match="radius"):
         mode_change_path(rpr, QA, 1, 2, radius=-1.0)

@@ -274,7 +274,7 @@ def test_animate_a_spatial_batch(tmp_path):
     Z = np.linspace(0.9, 1.2, 6)
     QA = np.array([np.linalg.norm([0, 0, z] + B - A, axis=1) for z in Z])
     batch = optkin.forward_batch(m, QA, guess=np.r_[0, 0, 0.9, 1.0, 0, 0, 0])
-    assert np.all(batch.success)
+    assert np.all(batch.closed) and batch.success
     gif = tmp_path / "lift.gif"
     anim = animate(m, batch, gif, dpi=40)
     assert Image.open(gif).n_frames == 6 and anim._fig.axes[0].name == "3d"

@@ -79,7 +79,7 @@ def check(call):
     elif isinstance(out, optkin.WorkingModes):
         out.to_dict()
     elif isinstance(out, optkin.BatchResult):
-        assert out.success.dtype == bool and type(out.all_success) is bool
+        assert out.closed.dtype == bool and type(out.success) is bool
         assert out.status in optkin.results.STATUS
         out.to_dict()
     else:

@@ -322,7 +322,7 @@ def test_time_limit_stops_a_monodromy_that_does_not_end(monkeypatch, tmp_path):
     monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
     m = optkin.mechanisms.rps3()
     modes = optkin.assembly_modes(m, [1.03, 1.03, 1.03], method="homotopy")
-    assert not modes.complete and modes.info["status"] == "iteration_limit"
+    assert not modes.complete and modes.info["status"] == "time_limit"
     assert modes.info["monodromy_stopped"] == "time"
     assert "time limit" in modes.info["message"]
     assert not list(tmp_path.glob("optkin_start_*.npz"))

@@ -394,7 +394,7 @@ def test_assembly_modes_seed_and_width_are_checked(rpr3, closed):
 
 
 def test_jacobians_tol_is_checked(rpr3, closed):
-    with pytest.raises(MechanismError, match=r"jacobians: tol must be a positive number"):
+    with pytest.raises(MechanismError, match=r"jacobians: tol must be a number > 0"):
         optkin.jacobians(rpr3, closed, tol="1e-8")
 
 

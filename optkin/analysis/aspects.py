@@ -31,12 +31,13 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_float
+from .._checks import as_float, check_mechanism, check_number
 from ..errors import MechanismError
 from ..limits import SAFETY, check_size, show
 from ..mechanism import Mechanism
 from ..model import get_model
 from ..model.charts import PlanarChart, planar_chart
+from ..results import INACCURATE, LIMIT_REACHED, OPTIMAL, jsonable
 from .continuation import (
     DEFAULT_STEP,
     MIN_POINTS,
@@ -49,7 +50,6 @@ from .continuation import (
     _singular_curves,
     _split_wrapped,
     augmented_system,
-    check_number,
 )
 from .planar import Face, faces
 
@@ -112,7 +112,19 @@ class Aspect:
 
 @dataclass
 class Aspects:
-    """The generalized aspects of every working mode (see :func:`aspects`)."""
+    """The generalized aspects of every working mode (see :func:`aspects`).
+
+    Attributes
+    ----------
+    aspects : list of Aspect
+        Every aspect (working mode, sign of det A, face, area, representative point).
+    curves : SingularCurves
+        The curves that bound them.
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``"optimal"``; ``"inaccurate"`` when the
+        curves are, or an aspect has no sign of det A; ``"time_limit"`` /
+        ``"memory_limit"`` when the curves stopped at a budget (no aspects then).
+    """
 
     mechanism: str
     working_modes: list[tuple[int, ...]]
@@ -146,7 +158,8 @@ class Aspects:
         return {m: len(self.of_mode(m)) for m in self.working_modes}
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        return jsonable({
             "mechanism": self.mechanism, "success": self.success, "status": self.status,
             "message": self.message, "count": len(self.aspects),
             "n_working_modes": len(self.working_modes),
@@ -154,7 +167,7 @@ class Aspects:
             "counts": [self.counts[m] for m in self.working_modes],
             "aspects": [a.to_dict() for a in self.aspects], "time": self.time,
             "workspace_area": [self.workspace_area.get(m) for m in self.working_modes],
-        }
+        })
 
     def plot(self, path: str | None = None, title: str | None = None) -> Any:
         """One column per working mode: its aspects in the workspace and the joint space."""
@@ -164,7 +177,17 @@ class Aspects:
 
 @dataclass
 class Workspace:
-    """The reachable workspace in a plane, per working mode and in total."""
+    """The reachable workspace in a plane, per working mode and in total.
+
+    Attributes
+    ----------
+    regions, areas : dict
+        Per working mode: its faces and their total area; ``total`` and ``area`` for the
+        union.
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``"optimal"``, ``"inaccurate"`` (the
+        serial curves are), ``"time_limit"`` / ``"memory_limit"`` (no regions then).
+    """
 
     mechanism: str
     plane: tuple[str, str]
@@ -187,12 +210,13 @@ class Workspace:
                 f"{len(self.working_modes)} working mode(s), status={self.status!r})")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"mechanism": self.mechanism, "success": self.success, "status": self.status,
-                "message": self.message, "area": self.area,
-                "working_modes": [list(m) for m in self.working_modes],
-                "areas": [self.areas[m] for m in self.working_modes],
-                "n_regions": [len(self.regions[m]) for m in self.working_modes],
-                "time": self.time}
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        return jsonable({"mechanism": self.mechanism, "success": self.success,
+                         "status": self.status, "message": self.message, "area": self.area,
+                         "working_modes": [list(m) for m in self.working_modes],
+                         "areas": [self.areas[m] for m in self.working_modes],
+                         "n_regions": [len(self.regions[m]) for m in self.working_modes],
+                         "time": self.time})
 
     def plot(self, path: str | None = None, title: str | None = None) -> Any:
         """The reachable regions of each working mode and their union."""
@@ -301,10 +325,7 @@ def _check_path(path: Any) -> None:
 
 
 def _check_plane(mech: Mechanism, fixed: Mapping[str, float] | None):
-    if not isinstance(mech, Mechanism):
-        raise MechanismError(
-            f"expected an optkin Mechanism, got {type(mech).__name__}; build one with "
-            "optkin.mechanisms.* or Mechanism.from_legs")
+    check_mechanism(mech)
     model = get_model(mech)
     chart = planar_chart(model)
     if chart is None:
@@ -421,7 +442,7 @@ def aspects(
     for a five-bar), then the seeding chart of :func:`singular_curves` (``grid``^2 points),
     then every traced point at about 2.1 KB plus 60 nv bytes (the curves and the planar
     arrangements of the regions; 2.1 KB measured for a five-bar). When the curves stop
-    at a budget (status ``"memory_budget"`` or ``"time_limit"``) no aspects are returned
+    at a budget (status ``"memory_limit"`` or ``"time_limit"``) no aspects are returned
     and ``success`` is False.
 
     Examples
@@ -443,7 +464,7 @@ def aspects(
             kw = {} if step is None else {"step": step}  # grid, qa_grid: planar only
             return aspects3d(mech, limits=limits, bounds=bounds, **kw)  # type: ignore
     fixed, names, chart = _check_plane(mech, fixed)
-    qa_grid = check_number("qa_grid", qa_grid, integer=True, low=2)
+    qa_grid = check_number(qa_grid, "qa_grid", integer=True, lo=2)
     lim_map = _limit_map(mech, names, limits)
     model = get_model(mech)
     qa_cost = _qa_grid_cost(chart, "aspects", qa_grid)
@@ -477,7 +498,7 @@ def aspects(
     counts = {m: sum(a.working_mode == m for a in out) for m in modes}
     msg = (f"{len(modes)} working mode(s), aspects per mode "
            f"{[counts[m] for m in modes]}; curves: {curves.message}")
-    status = "ok" if ok else _failed_status(curves)
+    status = OPTIMAL if ok else _failed_status(curves)
     return Aspects(mechanism=mech.name, working_modes=modes, aspects=out, curves=curves,
                    plane=curves.plane, qa_names=tuple(mech.active_names), qa_grid=qgrid,
                    success=bool(ok), status=status, message=msg,
@@ -618,7 +639,7 @@ def workspace(
     """
     t0 = time.perf_counter()
     fixed, names, chart = _check_plane(mech, fixed)
-    qa_grid = check_number("qa_grid", qa_grid, integer=True, low=2)
+    qa_grid = check_number(qa_grid, "qa_grid", integer=True, lo=2)
     lim_map = _limit_map(mech, names, limits)
     model = get_model(mech)
     qa_cost = _qa_grid_cost(chart, "workspace", qa_grid)
@@ -652,7 +673,7 @@ def workspace(
     ok = (curves.success or not has_serial) and curves.status not in _STOPPED
     return Workspace(mechanism=mech.name, plane=curves.plane, working_modes=modes,
                      regions=regions, areas=areas, total=total, area=area, curves=curves,
-                     success=bool(ok), status="ok" if ok else _failed_status(curves),
+                     success=bool(ok), status=OPTIMAL if ok else _failed_status(curves),
                      message=f"workspace area {area:.6g}; per mode "
                              f"{[round(areas[m], 6) for m in modes]}",
                      time=time.perf_counter() - t0, qa_masks=qmasks, qa_grid=qgrid,
@@ -692,7 +713,7 @@ def _mode_qa_masks(chart: PlanarChart, regions, n, lim_map):
 # ---------------------------------------------------------------------------------------
 
 #: Statuses of curves stopped by a budget (time or memory): the regions are incomplete.
-_STOPPED = ("time_limit", "memory_budget")
+_STOPPED = LIMIT_REACHED
 # Measured memory (peak resident growth, VmHWM, of a fresh process). Per traced point of
 # the curves, beyond what singular_curves keeps: the polylines cut per working mode and
 # the planar arrangement of each (segments, split lists, vertices, half-edges, faces):
@@ -726,7 +747,7 @@ def _qa_grid_cost(chart: PlanarChart, where: str, n: int) -> float:
 
 
 def _failed_status(curves: SingularCurves) -> str:
-    return curves.status if curves.status in _STOPPED else "inaccurate"
+    return curves.status if curves.status in _STOPPED else INACCURATE
 
 
 # ---------------------------------------------------------------------------------------

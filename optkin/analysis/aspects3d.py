@@ -45,6 +45,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
+from ..results import OPTIMAL, TIME_LIMIT, jsonable
 from .planar import Face, face_arc_area, point_in_face
 
 __all__ = ["Aspect3D", "Aspects3D", "aspects3d"]
@@ -90,7 +91,18 @@ class Aspect3D:
 
 @dataclass
 class Aspects3D:
-    """The 3-D generalized aspects of a 3-DoF planar platform (see :func:`aspects3d`)."""
+    """The 3-D generalized aspects of a 3-DoF planar platform (see :func:`aspects3d`).
+
+    Attributes
+    ----------
+    aspects : list of Aspect3D
+        Every aspect, with its volume and sections.
+    phis : ndarray
+        The orientations of the sections.
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``"optimal"``; a section's status when
+        one failed; ``"time_limit"`` when refinement stopped at the time limit.
+    """
 
     mechanism: str
     aspects: list[Aspect3D]
@@ -117,10 +129,12 @@ class Aspects3D:
         return any(n > 1 for a in self.aspects for _, n in a.modes_at)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"mechanism": self.mechanism, "success": self.success, "status": self.status,
-                "message": self.message, "count": len(self.aspects),
-                "n_sections": len(self.phis), "cuspidal": self.cuspidal,
-                "aspects": [a.to_dict() for a in self.aspects], "time": self.time}
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        return jsonable({"mechanism": self.mechanism, "success": self.success,
+                         "status": self.status, "message": self.message,
+                         "count": len(self.aspects), "n_sections": len(self.phis),
+                         "cuspidal": self.cuspidal,
+                         "aspects": [a.to_dict() for a in self.aspects], "time": self.time})
 
     def plot(self, path: str | None = None, every: int = 3, title: str | None = None) -> Any:
         """The aspects as stacks of section outlines in (x, y, phi), one colour each."""
@@ -286,25 +300,25 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
 
     time_limit : float
         Seconds (capped by the time budget); past it no gap is refined any more and the
-        result says so (``success=False``, status ``"iteration_limit"``).
+        result says so (``success=False``, status ``"time_limit"``).
 
     Returns
     -------
     Aspects3D
     """
+    from .._checks import check_mechanism, check_number
     from ..limits import Deadline, time_budget
-    from .continuation import check_number
 
-    min_gap = check_number("aspects3d: min_gap", min_gap, strict=True)
-    tiny = check_number("aspects3d: tiny", tiny)
-    step = check_number("aspects3d: step", step, strict=True)
-    deadline = Deadline(min(check_number("aspects3d: time_limit", time_limit, strict=True),
+    min_gap = check_number(min_gap, "aspects3d: min_gap", lo=0.0, lo_open=True)
+    tiny = check_number(tiny, "aspects3d: tiny", lo=0.0)
+    step = check_number(step, "aspects3d: step", lo=0.0, lo_open=True)
+    deadline = Deadline(min(check_number(time_limit, "aspects3d: time_limit", lo=0.0, lo_open=True),
                             time_budget()))
     from .aspects import aspects
 
     t0 = time.perf_counter()
-    if not isinstance(slices, (int, np.integer)) or isinstance(slices, bool) or slices < 4:
-        raise MechanismError(f"aspects3d: slices must be an integer >= 4, got {slices!r}")
+    slices = check_number(slices, "aspects3d: slices", integer=True, lo=4, default=36)
+    check_mechanism(mech, "aspects3d")
     model = get_model(mech)
     turn = [n for n, a in zip(model.x_names, model.x_angle) if a]
     if model.na != 3 or len(turn) != 1 or model.nx != 3:
@@ -464,7 +478,7 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
            f"change); volumes {[round(a.volume, 6) for a in out]}"
            + ("; refinement stopped at the time limit: counts may be wrong" if late else ""))
     return Aspects3D(mech.name, out, np.array(order), not late,
-                     "iteration_limit" if late else "optimal", msg,
+                     TIME_LIMIT if late else OPTIMAL, msg,
                      time.perf_counter() - t0, (model.x_names[0], model.x_names[1], angle))
 
 

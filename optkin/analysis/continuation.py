@@ -39,7 +39,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .._checks import MAX_ABS, as_float, as_int, as_matrix, as_vector
+from .._checks import MAX_ABS, as_float, as_matrix, as_vector, check_mechanism, check_number
 from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..limits import SAFETY, Deadline, check_size, largest_size, memory_budget, show
@@ -47,6 +47,7 @@ from ..mechanism import Mechanism
 from ..model import get_model
 from ..model.charts import PlanarChart, planar_chart
 from ..model.compiled import FastFn
+from ..results import INACCURATE, MEMORY_LIMIT, OPTIMAL, TIME_LIMIT, jsonable
 
 __all__ = ["Curve", "SingularCurves", "singular_curves", "augmented_system"]
 
@@ -362,7 +363,20 @@ class Curve:
 
 @dataclass
 class SingularCurves:
-    """The singular loci of a mechanism in a plane (see :func:`singular_curves`)."""
+    """The singular loci of a mechanism in a plane (see :func:`singular_curves`).
+
+    Attributes
+    ----------
+    curves : list of Curve
+        Each traced curve (kind, full points, plane points, residuals).
+    branch_points, cusps : ndarray
+        Full points (q_a then x) where curves cross, and cusps of the parallel curves.
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``"optimal"`` (also when no curve lies in
+        the box: ``count`` 0, the message says so), ``"inaccurate"`` when some curve's
+        residual exceeds 1e-9, ``"time_limit"`` / ``"memory_limit"`` when tracing stopped
+        at a budget (``success`` False, the curves incomplete).
+    """
 
     mechanism: str
     names: tuple[str, ...]
@@ -421,11 +435,12 @@ class SingularCurves:
         return P
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
         kinds: dict[str, int] = {}
         for c in self.curves:
             k = c.kind.split(":")[0]
             kinds[k] = kinds.get(k, 0) + 1
-        return {
+        return jsonable({
             "mechanism": self.mechanism, "plane": list(self.plane), "fixed": self.fixed,
             "success": self.success, "status": self.status, "message": self.message,
             "count": self.count, "counts": kinds, "n_points": int(sum(len(c) for c in self.curves)),
@@ -439,7 +454,7 @@ class SingularCurves:
                 self.info.get("actuator_singularities", np.zeros((0, len(self.names))))).tolist(),
             "time": self.time, "n_seeds": self.n_seeds,
             "curves": [c.to_dict() for c in self.curves],
-        }
+        })
 
     def plot(self, path: str | None = None, ax: Any = None, title: str | None = None) -> Any:
         """Draw the curves in the plane (PNG when ``path`` is given)."""
@@ -1147,8 +1162,9 @@ def singular_curves(
     363 bytes measured for a five-bar, 634 for a 3-RPR section); every traced point costs
     about 600 + 60 nv bytes (570 measured), and a given ``max_steps`` must leave room for
     2 ``max_steps`` points. While tracing, the curves stop when the points would exceed
-    the budget (status ``"memory_budget"``) or when the time budget runs out (status
-    ``"time_limit"``); ``success`` is then False. ``step`` lies between
+    the budget (status ``"memory_limit"``) or when the time budget runs out (status
+    ``"time_limit"``); ``success`` is then False. No curve in the box is a successful
+    answer (status ``"optimal"``, ``count`` 0) whose message says so. ``step`` lies between
     :data:`MIN_STEP` and :data:`MAX_STEP`.
 
     Examples
@@ -1174,17 +1190,16 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     caller; ``max_steps=None``: the default, lowered to what the budget allows)."""
     t0 = time.perf_counter()
     deadline = Deadline()
-    if not isinstance(mech, Mechanism):
-        raise MechanismError(f"expected an optkin Mechanism, got {type(mech).__name__}")
-    grid = check_number("grid", grid, integer=True, low=2, optional=True)
-    step = check_number("step", step, low=0.0, strict=True, optional=True)
+    check_mechanism(mech, where)
+    grid = check_number(grid, "grid", integer=True, lo=2, optional=True)
+    step = check_number(step, "step", lo=0.0, lo_open=True, optional=True)
     if step is not None and not MIN_STEP <= step <= MAX_STEP:
         raise MechanismError(f"step: expected a number between {MIN_STEP:g} and {MAX_STEP:g} "
                              f"(scaled units: lengths / mechanism size, radians), got {step:g}")
-    tol = check_number("tol", tol, low=0.0, strict=True)
+    tol = check_number(tol, "tol", lo=0.0, lo_open=True)
     user_steps = max_steps is not None
     if user_steps:
-        max_steps = check_number("max_steps", max_steps, integer=True, low=1)
+        max_steps = check_number(max_steps, "max_steps", integer=True, lo=1)
     if isinstance(cusps, (np.bool_, numbers.Integral)) and not isinstance(cusps, bool) \
             and cusps in (0, 1):
         cusps = bool(cusps)
@@ -1352,9 +1367,12 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
             tr = _Tracer(sys, pvals, 0.0, pidx, bounds_arr, hmax, tol, max_steps, budget)
             act_pts += _det_zeros_on(tr, c, fixed_idx, fixed_map)
     maxres = max((float(np.max(c.residual)) for c in curves), default=0.0)
-    ok = bool(curves) and maxres < 1e-9
-    status = "ok" if ok else ("no_curves" if not curves else "inaccurate")
+    ok = maxres < 1e-9  # no curve found is an answer too: the message says so
+    status = OPTIMAL if ok else INACCURATE
     msg = f"{len(curves)} curve(s), {len(bps)} branch point(s), max residual {maxres:.1e}"
+    if not curves:
+        msg = (f"no singular curve found in the box ({n_seeds} seed(s) met the conditions "
+               f"{[c for c, _ in conds]}): {msg}")
     if messages:
         msg += "; " + "; ".join(messages)
     if budget.reason is not None:
@@ -1465,26 +1483,6 @@ def _cusps_on(tr: _Tracer, c: Curve, pidx, fixed_idx, fixed_map) -> list[np.ndar
     return out
 
 
-def check_number(name: str, v: Any, *, integer: bool = False, low: float = 0.0,
-                 strict: bool = False, optional: bool = False) -> Any:
-    """``v`` as a finite int or float >= ``low``, else a MechanismError naming ``name``.
-
-    ``strict``: > ``low``; ``integer``: a whole number; ``optional``: None is accepted (and
-    returned).
-    """
-    if v is None and optional:
-        return None
-    what = "an integer" if integer else "a number"
-    rel = ">" if strict else ">="
-    try:
-        x = as_int(v, name) if integer else as_float(v, name)
-    except MechanismError:
-        x = None
-    if x is None or (x <= low if strict else x < low):
-        raise MechanismError(f"{name}: expected {what} {rel} {low:g}, got {show(v)}")
-    return x
-
-
 # ---------------------------------------------------------------------------------------
 # arguments and budgets
 # ---------------------------------------------------------------------------------------
@@ -1521,13 +1519,13 @@ class _Budget:
     def exhausted(self) -> bool:
         if self.reason is None:
             if self.max_points is not None and self.points >= self.max_points:
-                self.reason = "memory_budget"
+                self.reason = MEMORY_LIMIT
             elif self.deadline.expired():
-                self.reason = "time_limit"
+                self.reason = TIME_LIMIT
         return self.reason is not None
 
     def message(self, where: str) -> str:
-        if self.reason == "memory_budget":
+        if self.reason == MEMORY_LIMIT:
             return (f"{where}: stopped after {self.points} traced points, the most the memory "
                     "budget allows (OPTKIN_MEMORY_BUDGET); the curves are incomplete: give a "
                     "larger step or a smaller box")

@@ -34,10 +34,11 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import check_mechanism, check_number
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
-from .continuation import check_number
+from ..results import INACCURATE, INFEASIBLE, OPTIMAL, TIME_LIMIT, jsonable
 
 __all__ = ["ModeChangePath", "mode_change_path", "Cuspidality", "is_cuspidal", "CuspCurves",
            "cusp_curves"]
@@ -52,7 +53,8 @@ class ModeChangePath:
     ----------
     success, status, message :
         ``status`` is ``"optimal"`` when a path was found, ``"infeasible"`` when the modes
-        lie in different aspects (det A of opposite signs) or no loop joined them.
+        lie in different aspects (det A of opposite signs) or no loop joined them,
+        ``"time_limit"`` when the time limit stopped the search first.
     qa_path : ndarray (N, na)
         The actuated values along the path (starts and ends at ``qa``).
     x : ndarray (N, nx)
@@ -96,14 +98,15 @@ class ModeChangePath:
                 f"{len(self.cusps)} loop(s), status={self.status!r})")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"success": self.success, "status": self.status, "message": self.message,
-                "qa": self.qa.tolist(), "start": self.start.tolist(),
-                "target": self.target.tolist(), "qa_path": self.qa_path.tolist(),
-                "x": self.x.tolist(), "det": self.det.tolist(),
-                "min_conditioning": self.min_conditioning, "cusps": self.cusps.tolist(),
-                "modes": list(self.modes), "det_signs": list(self.det_signs),
-                "section": dict(self.section), "loops_tried": self.loops_tried,
-                "time": self.time}
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        return jsonable({
+            "success": self.success, "status": self.status, "message": self.message,
+            "qa": self.qa, "start": self.start, "target": self.target,
+            "qa_path": self.qa_path, "x": self.x, "det": self.det,
+            "min_conditioning": self.min_conditioning, "cusps": self.cusps,
+            "modes": list(self.modes), "det_signs": list(self.det_signs),
+            "section": dict(self.section), "loops_tried": self.loops_tried,
+            "time": self.time})
 
     def plot(self, path: str | None = None, ax: Any = None, title: str | None = None) -> Any:
         """The path in the joint-space section over its singular curves and cusps."""
@@ -159,8 +162,8 @@ class ModeChangePath:
 
         if not self.success or not self.results:
             raise MechanismError("animate: this ModeChangePath has no path (success=False)")
-        fps = check_number("animate: fps", fps, strict=True)
-        frames = check_number("animate: frames", frames, integer=True, low=2)
+        fps = check_number(fps, "animate: fps", lo=0.0, lo_open=True)
+        frames = check_number(frames, "animate: frames", integer=True, lo=2)
         frames = max(2, min(int(frames), len(self.results)))
         idx = np.unique(np.linspace(0, len(self.results) - 1, frames).round().astype(int))
         draws = [_drawing(self.mechanism, self.results[k]) for k in idx]
@@ -257,7 +260,7 @@ def _pieces_result(mech, qa, modes, i0, i1, signs, section, fixed, pieces, C, ch
                           for n, p in enumerate(pieces)])
     cond = np.concatenate([np.asarray(p[2].info["cond"]) for p in pieces])
     return ModeChangePath(
-        True, "optimal",
+        True, OPTIMAL,
         f"mode {i0} -> mode {i1} by {len(pieces)} loop(s) about the cusp(s) at "
         f"{[np.round(C[p[0]], 4).tolist() for p in pieces]} (section "
         f"{fixed or 'the joint space'}); det W_p keeps its sign "
@@ -269,7 +272,7 @@ def _pieces_result(mech, qa, modes, i0, i1, signs, section, fixed, pieces, C, ch
 
 
 def _failed(model, qa, modes, i0, i1, signs, section, msg, tried, curves, t0,
-            status: str = "infeasible"):
+            status: str = INFEASIBLE):
     na = model.na
     return ModeChangePath(False, status, msg, qa, modes[i0].x.copy(),
                           modes[i1].x.copy(), np.zeros((0, na)), np.zeros((0, model.nx)),
@@ -319,12 +322,6 @@ def _check_qa_arg(model, qa, who):
     return qa
 
 
-def _positive_int(who, name, v):
-    if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
-        raise MechanismError(f"{who}: {name} must be a positive integer, got {v!r}")
-    return int(v)
-
-
 def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
                      radius: float | None = None, angles: int = 12, depth: int = 4,
                      bounds: Any = None, points: int = 240,
@@ -371,17 +368,16 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
 
     t0 = time.perf_counter()
     who = "mode_change_path"
-    deadline = Deadline(min(check_number(f"{who}: time_limit", time_limit, strict=True),
+    deadline = Deadline(min(check_number(time_limit, f"{who}: time_limit", lo=0.0, lo_open=True),
                             time_budget()))
     if radius is not None:
-        radius = check_number(f"{who}: radius", radius, strict=True)
+        radius = check_number(radius, f"{who}: radius", lo=0.0, lo_open=True)
+    check_mechanism(mech, who)
     model = get_model(mech)
     qa = _check_qa_arg(model, qa, who)
-    angles = _positive_int(who, "angles", angles)
-    depth = _positive_int(who, "depth", depth)
-    angles = _positive_int(who, "angles", angles)
-    if radius is not None:
-        radius = check_number(f"{who}: radius", radius, strict=True)
+    angles = check_number(angles, f"{who}: angles", integer=True, lo=1, default=12)
+    depth = check_number(depth, f"{who}: depth", integer=True, lo=1, default=4)
+    points = check_number(points, f"{who}: points", integer=True, lo=1, default=240)
     modes = assembly_modes(mech, qa)
     if len(modes) < 2:
         raise MechanismError(f"{who}: qa has {len(modes)} assembly mode(s); a mode change "
@@ -443,7 +439,7 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
                        f"modes reached: {sorted(prev)}); a larger radius or more angles "
                        "may find one" + ("; stopped at the time limit" if deadline.expired()
                                          else ""), tried, curves, t0,
-                       "iteration_limit" if deadline.expired() else "infeasible")
+                       TIME_LIMIT if deadline.expired() else INFEASIBLE)
     chain, pieces, k = [i1], [], i1
     while prev[k] is not None:
         i, ci, P, tr = prev[k]
@@ -458,7 +454,25 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
 
 @dataclass
 class Cuspidality:
-    """The answer of :func:`is_cuspidal` with its evidence."""
+    """The answer of :func:`is_cuspidal` with its evidence.
+
+    Attributes
+    ----------
+    cuspidal : bool or None
+        True with the path that proves it (``evidence``); None when no assembly-mode change
+        was found (not a proof of the contrary).
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``success`` True and status
+        ``"optimal"`` when a mode change was found; else ``success`` False with status
+        ``"infeasible"`` (no change found by the loops tried) or ``"time_limit"`` (the
+        search stopped at the time limit); the message says what was tried.
+    evidence : ModeChangePath or None
+        The mode-changing path.
+    sections : list of float
+        The section values of the first actuated joint searched.
+    cusps : int
+        Cusps met in those sections.
+    """
 
     cuspidal: bool | None
     message: str
@@ -466,14 +480,26 @@ class Cuspidality:
     sections: list[float]
     cusps: int
     time: float = 0.0
+    status: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.status:
+            self.status = OPTIMAL if self.cuspidal else INFEASIBLE
+
+    @property
+    def success(self) -> bool:
+        """Whether the search answered: a mode change was found (``cuspidal`` True)."""
+        return self.cuspidal is not None
 
     def __bool__(self) -> bool:
         return bool(self.cuspidal)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"cuspidal": self.cuspidal, "message": self.message, "sections": self.sections,
-                "cusps": self.cusps, "time": self.time,
-                "evidence": None if self.evidence is None else self.evidence.to_dict()}
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        return jsonable({"cuspidal": self.cuspidal, "success": self.success,
+                         "status": self.status, "message": self.message,
+                         "sections": self.sections, "cusps": self.cusps, "time": self.time,
+                         "evidence": self.evidence})
 
 
 def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = None,
@@ -495,19 +521,20 @@ def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = No
 
     t0 = time.perf_counter()
     who = "is_cuspidal"
-    deadline = Deadline(min(check_number(f"{who}: time_limit", time_limit, strict=True),
+    deadline = Deadline(min(check_number(time_limit, f"{who}: time_limit", lo=0.0, lo_open=True),
                             time_budget()))
+    check_mechanism(mech, who)
     model = get_model(mech)
     na = model.na
     _check_qa_arg(model, np.zeros(na), who)
-    angles = _positive_int(who, "angles", angles)
+    angles = check_number(angles, f"{who}: angles", integer=True, lo=1, default=8)
     if radius is not None:
-        radius = check_number(f"{who}: radius", radius, strict=True)
+        radius = check_number(radius, f"{who}: radius", lo=0.0, lo_open=True)
     if na == 3:
         name = _names_of(mech)[0]
         if sections is None:
             sections = np.linspace(0.6, 1.6, 5) * float(model.length)
-        values = [check_number(f"{who}: sections", v, low=-np.inf)
+        values = [check_number(v, f"{who}: sections")
                   for v in np.atleast_1d(np.asarray(sections, dtype=float))]
     else:
         name, values = None, [float("nan")]
@@ -558,7 +585,7 @@ def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = No
     return Cuspidality(None, f"no assembly-mode change found by {tried} loops about "
                        f"{n_cusps} cusp(s) in {len(values)} section(s){late}; not a proof "
                        "that the mechanism is noncuspidal", None, values, n_cusps,
-                       time.perf_counter() - t0)
+                       time.perf_counter() - t0, TIME_LIMIT if late else INFEASIBLE)
 
 
 @dataclass
@@ -575,6 +602,9 @@ class CuspCurves:
         Every cusp found, linked or not.
     sections : ndarray
         The values of the first actuated joint the sections were taken at.
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``"optimal"``; ``"inaccurate"`` when a
+        section's curves are; ``"time_limit"`` when later sections were left out.
     """
 
     mechanism: str
@@ -596,10 +626,11 @@ class CuspCurves:
                 f"{len(self.points)} cusp point(s), status={self.status!r})")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"mechanism": self.mechanism, "names": list(self.names),
-                "success": self.success, "status": self.status, "message": self.message,
-                "curves": [c.tolist() for c in self.curves],
-                "sections": self.sections.tolist(), "time": self.time}
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        return jsonable({"mechanism": self.mechanism, "names": list(self.names),
+                         "success": self.success, "status": self.status,
+                         "message": self.message, "curves": list(self.curves),
+                         "sections": self.sections, "time": self.time})
 
     def plot(self, path: str | None = None, ax: Any = None, title: str | None = None) -> Any:
         """The cusp curves in the joint space (3-D axes; ``ax`` may be a 3-D Axes)."""
@@ -641,13 +672,14 @@ def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices:
 
     t0 = time.perf_counter()
     who = "cusp_curves"
-    deadline = Deadline(min(check_number(f"{who}: time_limit", time_limit, strict=True),
+    deadline = Deadline(min(check_number(time_limit, f"{who}: time_limit", lo=0.0, lo_open=True),
                             time_budget()))
-    slope = check_number(f"{who}: slope", slope, strict=True)
+    slope = check_number(slope, f"{who}: slope", lo=0.0, lo_open=True)
+    check_mechanism(mech, who)
     model = get_model(mech)
     if model.na != 3:
         raise MechanismError(f"{who}: needs 3 actuated joints, {mech.name} has {model.na}")
-    slices = _positive_int(who, "slices", slices)
+    slices = check_number(slices, f"{who}: slices", integer=True, lo=1, default=40)
     names = _names_of(mech)
     lim = _limit_map(mech, names, limits)
     lo, hi = _first_range(who, model, names, lim)
@@ -702,6 +734,6 @@ def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices:
            f"({names[0]} from {values[0]:.4g} to {values[-1]:.4g})"
            + (f"; {len(failed)} section(s) incomplete: {failed[0]}" if failed else "")
            + ("; stopped at the time limit: later sections left out" if late else ""))
-    status = "optimal" if ok else "iteration_limit" if late else "inaccurate"
+    status = OPTIMAL if ok else TIME_LIMIT if late else INACCURATE
     return CuspCurves(mech.name, tuple(names[:model.na]), [v[:, :model.na] for v in vs], vs,
                       pts, values, ok, status, msg, time.perf_counter() - t0)

@@ -34,7 +34,7 @@ from ..limits import Deadline, check_size, show
 from ..mechanism import Mechanism
 from ..model import get_model
 from ..model.analysis import task_rows
-from ..results import KinResult
+from ..results import OPTIMAL, TIME_LIMIT, KinResult, jsonable
 from .velocity import jacobians
 
 __all__ = ["SingularityMap", "singularity_map", "plot_singularity_map", "MEASURES"]
@@ -56,6 +56,10 @@ class SingularityMap:
         Measure name -> array (len(v), len(u)); NaN where no configuration exists.
     path : str or None
         The PNG written by :func:`plot_singularity_map`.
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``"optimal"`` when every grid point was
+        sampled (unreachable points are part of the answer: NaN), ``"time_limit"`` when
+        the time budget stopped the sampling; the message counts the reachable points.
     """
 
     mech_name: str
@@ -66,7 +70,7 @@ class SingularityMap:
     fixed: dict[str, float] = field(default_factory=dict)
     path: str | None = None
     success: bool = True
-    status: str = "ok"
+    status: str = OPTIMAL
     message: str = ""
 
     def __repr__(self) -> str:
@@ -76,7 +80,17 @@ class SingularityMap:
 
     @property
     def reachable(self) -> np.ndarray:
+        """Where a configuration was found (the measures are finite)."""
         return np.isfinite(self.values["distance"])
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict (:func:`optkin.results.jsonable`: NaN of unreachable points
+        becomes None)."""
+        return jsonable({"mechanism": self.mech_name, "success": self.success,
+                         "status": self.status, "message": self.message,
+                         "axes": list(self.axes), "u": self.u, "v": self.v,
+                         "fixed": self.fixed, "values": self.values, "path": self.path,
+                         "reachable": int(np.sum(self.reachable))})
 
 
 def _measures(jac: Any) -> dict[str, float]:
@@ -227,7 +241,7 @@ def singularity_map(
         fixed_out = {n: float(base[names.index(n)]) for n in names if n not in ax}
     sm = SingularityMap(mech.name, (str(ax[0]), str(ax[1])), u, v, vals, fixed_out)
     if stopped:
-        sm.success, sm.status, sm.message = False, "time_limit", stopped
+        sm.success, sm.status, sm.message = False, TIME_LIMIT, stopped
     else:
         sm.message = f"{int(np.isfinite(vals['distance']).sum())} of {u.size * v.size} points reachable"
     return sm

@@ -28,14 +28,14 @@ from typing import Any
 import numpy as np
 
 from .. import numeric
-from .._checks import as_float, as_int
-from .._checks import show as _show
+from .._checks import as_float, as_int, check_mechanism, check_number
 from .._dryrun import checkpoint
-from ..errors import MechanismError, NumericError
+from ..errors import NumericError
 from ..mechanism import Mechanism
 from ..model import Model, get_model
 from ..model.analysis import analysis_functions, z_of
 from ..model.analysis import joint_inventory as _joint_inventory
+from ..results import INFEASIBLE, OPTIMAL, jsonable
 
 __all__ = ["DofReport", "dof", "closed_configurations", "joint_inventory", "MAX_SAMPLES"]
 
@@ -66,6 +66,10 @@ class DofReport:
         lambda of each loop (3 planar, 6 spatial; from the rank of the loop's rows).
     nullity : list of int
         dim null(J) at each sampled configuration.
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``"optimal"`` when closed configurations
+        were sampled, ``"infeasible"`` (``success`` False, mobility -1) when least squares
+        found none; the message gives the verdict.
     """
 
     mech_name: str
@@ -75,6 +79,7 @@ class DofReport:
     agree: bool
     message: str
     success: bool = True
+    status: str = ""
     idle: int = 0
     n_links: int = 0
     n_joints: int = 0
@@ -86,23 +91,29 @@ class DofReport:
     samples: int = 0
     residual: float = 0.0
 
+    def __post_init__(self) -> None:
+        if not self.status:
+            self.status = OPTIMAL if self.success else INFEASIBLE
+
     def __repr__(self) -> str:
         flag = "agree" if self.agree else "DISAGREE"
         return (f"DofReport({self.mech_name!r}: grubler={self.grubler}, "
                 f"mobility={self.mobility}, {flag})")
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        return jsonable({
             "mech_name": self.mech_name, "grubler": int(self.grubler),
             "mobility": int(self.mobility), "constraints": int(self.constraints),
-            "agree": bool(self.agree), "message": self.message, "success": bool(self.success),
+            "agree": bool(self.agree), "success": bool(self.success), "status": self.status,
+            "message": self.message,
             "idle": int(self.idle), "n_links": int(self.n_links), "n_joints": int(self.n_joints),
             "n_loops": int(self.n_loops),
             "joint_freedoms": {str(k): int(v) for k, v in self.joint_freedoms.items()},
             "loop_lambda": [int(v) for v in self.loop_lambda],
             "nullity": [int(v) for v in self.nullity], "intended": int(self.intended),
             "samples": int(self.samples), "residual": float(self.residual),
-        }
+        })
 
 
 # ----------------------------------------------------------------------------- counting
@@ -253,23 +264,12 @@ def dof(mech: Mechanism, samples: int = 5, seed: int = 0, rtol: float = 1e-8) ->
     >>> (r.grubler, r.mobility, r.agree)
     (1, 1, True)
     """
-    if not isinstance(mech, Mechanism):
-        raise MechanismError(
-            f"dof: expected an optkin Mechanism, got {type(mech).__name__}; build one with "
-            "optkin.mechanisms.* or Mechanism.from_khalil / from_legs")
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or not (
-            1 <= samples <= MAX_SAMPLES):
-        raise MechanismError(f"dof: samples must be a positive integer <= {MAX_SAMPLES} "
-                             f"(default 5), got {_show(samples)}", path=("samples",))
-    try:
-        rtol_f = as_float(rtol, "rtol")
-    except MechanismError:
-        rtol_f = float("nan")
-    if not 0 < rtol_f < 1:
-        raise MechanismError(f"dof: rtol must be a number in (0, 1) (default 1e-8), got "
-                             f"{_show(rtol)}", path=("rtol",))
-    rtol = rtol_f
-    seed = as_int(seed, "dof: seed", lo=0, path=("seed",))
+    check_mechanism(mech, "dof")
+    samples = check_number(samples, "dof: samples", integer=True, lo=1, hi=MAX_SAMPLES,
+                           default=5, path=("samples",))
+    rtol = check_number(rtol, "dof: rtol", lo=0.0, hi=1.0, lo_open=True, hi_open=True,
+                        default=1e-8, path=("rtol",))
+    seed = check_number(seed, "dof: seed", integer=True, lo=0, default=0, path=("seed",))
     checkpoint()  # validation stops here: every argument is checked
     inv = joint_inventory(mech)
     freedoms = inv["freedoms"]

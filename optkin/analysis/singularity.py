@@ -43,12 +43,12 @@ from typing import Any
 import numpy as np
 
 from .. import numeric
-from .._checks import as_float
-from .._checks import show as _show
-from ..errors import MechanismError, NumericError
+from .._checks import check_option
+from ..errors import NumericError
 from ..mechanism import Mechanism
 from ..model import Model, get_model
 from ..model.analysis import analysis_functions, task_rows
+from ..results import ERROR, OPTIMAL, jsonable
 from .mobility import dof, rank_of, var_scale
 from .velocity import Jacobians, jacobians, twist_rows
 
@@ -85,6 +85,11 @@ class SingularityReport:
         Legs (1-based) whose B_ii vanishes (PSIK(k) of the slides); platforms only.
     jacobians : Jacobians
         The velocity model the verdicts come from.
+    success, status, message :
+        As every result (:mod:`optkin.results`): the status of the velocity model
+        (``"optimal"``; ``"infeasible"`` when q does not close the loops, the verdicts then
+        holding for the matrices evaluated there), or ``"error"`` when the verdicts could
+        not be computed (an undefined model, a failed decomposition).
     """
 
     types: set[str]
@@ -93,6 +98,7 @@ class SingularityReport:
     rtol: float
     success: bool = True
     message: str = ""
+    status: str = OPTIMAL
     legs_at_psik: tuple[int, ...] = ()
     null_motions: dict[str, np.ndarray] = field(default_factory=dict)
     jacobians: Jacobians | None = None
@@ -118,13 +124,13 @@ class SingularityReport:
         return f"SingularityReport({t})"
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "types": sorted(self.types),
-            "margins": {k: (None if not np.isfinite(v) else float(v))
-                        for k, v in self.margins.items()},
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        return jsonable({
+            "types": sorted(self.types), "margins": self.margins,
             "aliases": dict(self.aliases), "rtol": self.rtol, "success": self.success,
-            "message": self.message, "legs_at_psik": list(self.legs_at_psik),
-        }
+            "status": self.status, "message": self.message,
+            "legs_at_psik": list(self.legs_at_psik),
+        })
 
 
 def _rel_min(M: np.ndarray, k: int | None = None, ref: float | None = None
@@ -192,7 +198,8 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
     from ..solvers.common import merge_options
 
     opts = merge_options(CLASSIFY_DEFAULTS, options, "classify")
-    rtol, tol2 = (_positive_option(opts, k) for k in ("rtol", "second_order_tol"))
+    rtol, tol2 = (check_option(opts, k, "classify", CLASSIFY_DEFAULTS, lo=0.0, lo_open=True)
+                  for k in ("rtol", "second_order_tol"))
     jac = jacobians(mech, q)
     if not jac.info.get("defined", True):  # no numeric kernel sees the NaN of an undefined model
         return _undefined_report(jac, rtol, jac.message)
@@ -207,7 +214,7 @@ def _undefined_report(jac: Jacobians, rtol: float, message: str) -> SingularityR
     return SingularityReport(
         types=set(), margins={t: float("nan") for t in TYPES},
         aliases={k: False for k in ("PSFK", "MSFK", "PSIK", "MSIK", "both", "type_1", "type_2")},
-        rtol=rtol, success=False, message=message, jacobians=jac)
+        rtol=rtol, success=False, message=message, status=ERROR, jacobians=jac)
 
 
 def _classify(mech: Mechanism, jac: Jacobians, rtol: float, tol2: float) -> SingularityReport:
@@ -328,24 +335,13 @@ def _classify(mech: Mechanism, jac: Jacobians, rtol: float, tol2: float) -> Sing
     ser = "serial" in types
     aliases = {"PSFK": par, "MSFK": par, "PSIK": ser, "MSIK": ser, "both": par and ser,
                "type_1": ser, "type_2": par}
-    msg = jac.message
+    verdict = (f"singular: {', '.join(sorted(types))}" if types else
+               f"regular: no singularity at rtol {rtol:g}")
+    msg = f"{verdict}; {jac.message}" if jac.message else verdict
     return SingularityReport(types=types, margins=margins, aliases=aliases, rtol=rtol,
-                             success=jac.success, message=msg, legs_at_psik=legs_psik,
+                             success=jac.success, message=msg, status=jac.status,
+                             legs_at_psik=legs_psik,
                              null_motions=nulls, jacobians=jac)
-
-
-def _positive_option(opts: dict[str, Any], name: str) -> float:
-    """``opts[name]`` as a positive finite float, else a MechanismError naming the option."""
-    v = opts[name]
-    try:
-        f = as_float(v, name)
-    except MechanismError:
-        f = float("nan")
-    if not (np.isfinite(f) and f > 0):
-        raise MechanismError(
-            f"classify: option {name} must be a positive number (default "
-            f"{CLASSIFY_DEFAULTS[name]!r}), got {_show(v)}", path=("options", name))
-    return f
 
 
 def _degenerate(jac: Jacobians, model: Any, f: Any, Wp_s: np.ndarray, rs: np.ndarray,

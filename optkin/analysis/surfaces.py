@@ -29,6 +29,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
+from ..results import INACCURATE, OPTIMAL, TIME_LIMIT, jsonable
 
 __all__ = ["SingularSurface", "singular_surfaces"]
 
@@ -56,6 +57,10 @@ class SingularSurface:
         identically there, e.g. phi = 0 for a 3-RPR whose platform is a scaled copy of its
         base); each is meshed as a planar patch over the section's points within the
         strokes (a grid of the plane: every point of it is on the surface).
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``"optimal"``; ``"inaccurate"`` when a
+        section failed or no triangle was made; ``"time_limit"`` when sections were left
+        out at the time limit.
     """
 
     mechanism: str
@@ -83,12 +88,14 @@ class SingularSurface:
         return float(self.residual.max(initial=0.0))
 
     def to_dict(self) -> dict[str, Any]:
-        return {"mechanism": self.mechanism, "space": self.space, "names": list(self.names),
-                "success": self.success, "status": self.status, "message": self.message,
-                "n_vertices": int(len(self.vertices)), "n_triangles": int(len(self.triangles)),
-                "max_residual": self.max_residual, "open_curves": self.open_curves,
-                "n_sections": int(len(self.sections)), "time": self.time,
-                "planes": [float(v) for v in self.planes]}
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        return jsonable({
+            "mechanism": self.mechanism, "space": self.space, "names": list(self.names),
+            "success": self.success, "status": self.status, "message": self.message,
+            "n_vertices": int(len(self.vertices)), "n_triangles": int(len(self.triangles)),
+            "max_residual": self.max_residual, "open_curves": self.open_curves,
+            "n_sections": int(len(self.sections)), "time": self.time,
+            "planes": [float(v) for v in self.planes]})
 
     def plot(self, path: str | None = None, ax: Any = None, title: str | None = None,
              color: Any = None) -> Any:
@@ -154,24 +161,24 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
         Largest mean distance between stitched curves, in mechanism sizes.
     time_limit : float
         Seconds (capped by the time budget); the sections not reached are left out and
-        the result says so (status ``"iteration_limit"``).
+        the result says so (status ``"time_limit"``).
     """
+    from .._checks import check_mechanism, check_number
     from ..limits import Deadline, time_budget
     from .aspects import _first_range, _limit_map
-    from .continuation import _names_of, check_number, singular_curves
+    from .continuation import _names_of, singular_curves
 
     t0 = time.perf_counter()
     who = "singular_surfaces"
-    deadline = Deadline(min(check_number(f"{who}: time_limit", time_limit, strict=True),
+    deadline = Deadline(min(check_number(time_limit, f"{who}: time_limit", lo=0.0, lo_open=True),
                             time_budget()))
-    step = check_number(f"{who}: step", step, strict=True)
-    link = check_number(f"{who}: link", link, strict=True)
+    step = check_number(step, f"{who}: step", lo=0.0, lo_open=True)
+    link = check_number(link, f"{who}: link", lo=0.0, lo_open=True)
     if space not in ("task", "joint"):
         raise MechanismError(f"{who}: space must be 'task' or 'joint', got "
                              f"{space!r}")
-    if not isinstance(slices, (int, np.integer)) or isinstance(slices, bool) or slices < 2:
-        raise MechanismError(f"singular_surfaces: slices must be an integer >= 2, got "
-                             f"{slices!r}")
+    slices = check_number(slices, f"{who}: slices", integer=True, lo=2, default=72)
+    check_mechanism(mech, who)
     model = get_model(mech)
     turn = [n for n, a in zip(model.x_names, model.x_angle) if a]
     if model.na != 3 or model.nx != 3 or len(turn) != 1:
@@ -296,7 +303,7 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
            + ("; stopped at the time limit: later sections left out" if late else "")
            + (f"; wholly singular section(s) at {', '.join(f'{v:.6g}' for v in planes)} "
               "meshed as planar patches" if planes else ""))
-    status = "optimal" if ok else "iteration_limit" if late else "inaccurate"
+    status = OPTIMAL if ok else TIME_LIMIT if late else INACCURATE
     return SingularSurface(mech.name, space, names, V, Vf, T, R, np.asarray(values),
                            open_curves, ok, status, msg,
                            time.perf_counter() - t0, planes=planes)

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from .. import numeric
-from .._checks import as_float, as_vector
+from .._checks import as_vector, check_mechanism, check_number
 from .._checks import show as _show
 from .._dryrun import checkpoint
 from ..errors import MechanismError
@@ -46,7 +46,7 @@ from ..mechanism import Mechanism
 from ..model import Model, get_model
 from ..model.analysis import analysis_functions, leg_labels, platform_unknowns_only, task_rows, z_of
 from ..model.analysis import twist_rows as _twist_rows
-from ..results import KinResult, _jsonable
+from ..results import INFEASIBLE, OPTIMAL, SINGULAR, KinResult, jsonable
 
 __all__ = ["Jacobians", "jacobians", "config_of", "twist_rows", "TWIST_NAMES"]
 
@@ -142,6 +142,10 @@ class Jacobians:
         only.
     K : ndarray
         End-effector twist Jacobian over all joint variables (``var_names``).
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``"optimal"`` when q closes the loops;
+        ``"infeasible"`` when it does not (the matrices are evaluated there anyway);
+        ``"singular"`` when the model is undefined at q (e.g. a zero-length leg).
     """
 
     mech: Mechanism
@@ -265,7 +269,7 @@ class Jacobians:
             out[k] = None if v is None else np.asarray(v).tolist()
         for k in ("twist_names", "row_names", "qa_names", "qp_names", "qc_names", "x_names"):
             out[k] = list(getattr(self, k))
-        return _jsonable(out)  # NaN / inf entries (unclosed or singular q) -> None
+        return jsonable(out)  # NaN / inf entries (unclosed or singular q) -> None
 
     def __repr__(self) -> str:
         flag = "ok" if self.success else "NOT CLOSED"
@@ -310,14 +314,9 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
     >>> np.round(jac.W @ [0, 1, 0, 0, 0, 0], 12).tolist()   # [7.41]: theta3dot = -theta2dot
     [-1.0, 1.0]
     """
-    tol_in = tol
-    try:
-        tol = as_float(tol, "jacobians: tol", lo=0.0)
-    except MechanismError:
-        tol = 0.0
-    if tol <= 0:
-        raise MechanismError(f"jacobians: tol must be a positive number (default 1e-8), got "
-                             f"{_show(tol_in)}", path=("tol",))
+    tol = check_number(tol, "jacobians: tol", lo=0.0, lo_open=True, default=1e-8,
+                       path=("tol",))
+    check_mechanism(mech, "jacobians")
     model = get_model(mech)
     f = analysis_functions(model)
     qv, qa, x = config_of(mech, q)
@@ -392,7 +391,12 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
     if defined and not all(np.isfinite(a).all() for a in (H, K, J_a)):
         defined = info["defined"] = ok = False
         msg = "the velocity model is not finite at q (values too large?); it is undefined there"
-    status = "optimal" if ok else ("singular" if not defined else "infeasible")
+    status = OPTIMAL if ok else (SINGULAR if not defined else INFEASIBLE)
+    if ok and not msg:
+        msg = (f"q closes the loops (max |Phi| = {res:.2e}); cond W_p = "
+               f"{info['cond_W_p']:.3g}")
+    elif ok:
+        msg = f"q closes the loops (max |Phi| = {res:.2e}); {msg}"
     return Jacobians(
         mech=mech, q=qv, qa=qa, x=x, success=ok, status=status,
         message=msg, residual=res, W_a=W_a, W_p=W_p, W_ac=W_ac, W_pc=W_pc, W_c=W_c, W=W,

@@ -20,7 +20,7 @@ import numpy as np
 from .._checks import as_int, show
 from .._dryrun import checkpoint
 from ..errors import MechanismError
-from ..results import _jsonable
+from ..results import OPTIMAL, jsonable
 from .family import Family
 from .problem import Measure
 
@@ -41,6 +41,9 @@ class Atlas:
         Each measure on the grid (rows: the second variable), NaN outside the design space.
     dims : dict name -> ndarray (n1, n0)
         Every dimension on the grid.
+    success, status, message :
+        As every result (:mod:`optkin.results`); the message counts the designs inside
+        the design space (the others are NaN in ``values``).
     """
 
     names: tuple[str, str]
@@ -49,13 +52,15 @@ class Atlas:
     dims: dict[str, np.ndarray] = field(default_factory=dict)
     time: float = 0.0
     success: bool = True
-    status: str = "optimal"
+    status: str = OPTIMAL
     message: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        return _jsonable({"names": self.names, "axes": self.axes, "values": self.values,
-                          "time": self.time, "success": self.success,
-                          "status": self.status, "message": self.message})
+        """A JSON-ready dict (:func:`optkin.results.jsonable`: NaN outside the design space
+        becomes None)."""
+        return jsonable({"names": self.names, "axes": self.axes, "values": self.values,
+                         "time": self.time, "success": self.success,
+                         "status": self.status, "message": self.message})
 
     def best(self, measure: str, maximize: bool = True) -> dict[str, float]:
         """The grid design with the largest (or smallest) value of ``measure``."""
@@ -192,7 +197,9 @@ def atlas(family: Callable[..., Any] | Family, variables: Mapping[str, Any] | No
     full = fam.full(Z)
     dims = {name: full[:, i].reshape(X.shape) for i, name in enumerate(fam.names)}
     return Atlas(names=(fam.free[0], fam.free[1]), axes=(ax0, ax1), values=values, dims=dims,
-                 time=time.perf_counter() - t0)
+                 time=time.perf_counter() - t0,
+                 message=f"{len(measures)} measure(s) over {n0} x {n1} designs, "
+                         f"{int(inside.sum())} inside the design space")
 
 
 def _dumps(obj: Any) -> bytes:

@@ -41,11 +41,11 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .._checks import as_float, as_int, as_vector, show
+from .._checks import as_float, as_int, as_vector, check_mechanism, show
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
-from ..results import _jsonable
+from ..results import jsonable
 from ._evaluator import Evaluator, evaluator
 
 __all__ = ["Disc", "Box", "Aspect", "Integral", "Inscribed", "conditioning",
@@ -280,9 +280,7 @@ def _probe(mech: Mechanism, mode: Any = None, fixed: Mapping[str, float] | None 
     if family is not None:
         model = family.model0
     else:
-        if not isinstance(mech, Mechanism):
-            raise MechanismError(f"expected an optkin Mechanism, got {type(mech).__name__}; "
-                                 "build one with optkin.mechanisms.*")
+        check_mechanism(mech)
         model = get_model(mech)
     ev = evaluator(model.mech) if family is None else family.model0.cached(
         "design_evaluator", lambda: Evaluator(family.model0))
@@ -374,7 +372,10 @@ def singular_values(mech: Mechanism, points: Any, mode: Any = None,
 class Integral:
     """A region integral: ``value`` the measure (GCI or area), ``area`` the region's area,
     ``reachable`` the fraction of the region's area the mechanism reaches in the working
-    mode (and within limits), ``nodes`` the quadrature points used."""
+    mode (and within limits), ``nodes`` the quadrature points used; ``success``,
+    ``status`` and ``message`` as every result (:mod:`optkin.results`): ``"infeasible"``
+    when an aspect's seed is not a point of the working mode, ``"inaccurate"`` when the
+    adaptive quadrature stopped short of its tolerance."""
 
     value: float
     area: float
@@ -386,7 +387,8 @@ class Integral:
     message: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        return _jsonable(self.__dict__.copy())
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        return jsonable(self.__dict__.copy())
 
 
 def _section(pr: Probe, s0: float | None, lo: np.ndarray, hi: np.ndarray, points: Any,
@@ -717,7 +719,8 @@ def _integral(pr: Probe, region: Region, kind: str, order: int) -> Integral:
         if not conv:
             return Integral(val, A, 1.0, n, kind, False, "inaccurate",
                             "the adaptive quadrature stopped before reaching its tolerance")
-        return Integral(val, A, 1.0, n, kind)
+        return Integral(val, A, 1.0, n, kind, message=f"{kind} = {val:.6g} over the aspect "
+                        f"(area {A:.6g}, {n} quadrature nodes)")
     if not isinstance(region, (Disc, Box)):
         raise MechanismError(f"region: expected optkin.design.Disc, Box or Aspect, got "
                              f"{type(region).__name__}")
@@ -730,8 +733,10 @@ def _integral(pr: Probe, region: Region, kind: str, order: int) -> Integral:
         val = float(np.dot(np.where(ok, np.nan_to_num(o["inv_kappa"]), 0.0), W) / A)
     else:
         val = float(W[ok].sum())
-    msg = "" if reach == 1.0 else (f"{100 * (1 - reach):.3g} % of the region is outside the "
-                                   "working mode's reach or limits (counted as 1/kappa = 0)")
+    msg = f"{kind} = {val:.6g} over the region (area {A:.6g}, {len(W)} quadrature nodes)"
+    if reach != 1.0:
+        msg += (f"; {100 * (1 - reach):.3g} % of the region is outside the working mode's "
+                "reach or limits (counted as 1/kappa = 0)")
     return Integral(val, A, reach, len(W), kind, message=msg)
 
 
@@ -783,6 +788,9 @@ class Inscribed:
         The sign of det A in the aspect.
     evaluations : int
         Point evaluations spent.
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``"infeasible"`` when no feasible centre
+        exists, ``"inaccurate"`` for a quick estimate (``exact=False``).
     """
 
     shape: Any
@@ -807,7 +815,7 @@ class Inscribed:
     def to_dict(self) -> dict[str, Any]:
         d = self.__dict__.copy()
         d["area"] = self.area
-        return _jsonable(d)
+        return jsonable(d)
 
     def __repr__(self) -> str:
         what = "radius" if self.shape == "disc" else "half-side"
@@ -1053,7 +1061,9 @@ def largest_inscribed(mech: Mechanism, mode: Any = None, shape: str = "disc",
     if not exact:
         return _named(Inscribed(shape, h, c, P, _REASON[why], int(s0), pr.evals[0], True,
                          "inaccurate", "a quick estimate (exact=False)"), aspect_)
-    return _named(Inscribed(shape, h, c, P, _REASON[why], int(s0), pr.evals[0]), aspect_)
+    return _named(Inscribed(shape, h, c, P, _REASON[why], int(s0), pr.evals[0],
+                            message=f"size {h:.6g} at the centre {np.round(c, 6).tolist()}, "
+                                    f"bounded by the {_REASON[why]} boundary"), aspect_)
 
 
 def _named(res: Inscribed, aspect: tuple[float, float]) -> Inscribed:

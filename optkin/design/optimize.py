@@ -31,7 +31,7 @@ import numpy as np
 from .._checks import as_float, as_int, show
 from .._dryrun import checkpoint
 from ..errors import MechanismError
-from ..results import _jsonable
+from ..results import TIME_LIMIT, jsonable
 from .family import Family
 from .problem import (
     GCI,
@@ -78,6 +78,12 @@ class DesignResult:
     details : dict
         ``"objective"``: the objective's full result where it has one (the
         :class:`~optkin.design.Inscribed` shape: centre, contact, binding).
+    success, status, message :
+        As every result (:mod:`optkin.results`): ``"optimal"``; ``"infeasible"`` when no
+        design satisfies every constraint (the least violating is returned),
+        ``"inaccurate"`` when the denser verification or IPOPT's polish fails,
+        ``"time_limit"`` at ``time_limit``, ``"iteration_limit"`` when the exchange step
+        still finds violated points after ``rounds`` rounds.
     """
 
     dimensions: dict[str, float]
@@ -99,10 +105,10 @@ class DesignResult:
     message: str = ""
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict (:func:`optkin.results.jsonable`; the mechanism left out)."""
         d = {k: v for k, v in self.__dict__.items() if k not in ("mechanism", "details")}
-        d["details"] = {k: (v.to_dict() if hasattr(v, "to_dict") else v)
-                        for k, v in (self.details or {}).items()}
-        return _jsonable(d)
+        d["details"] = dict(self.details or {})
+        return jsonable(d)
 
     def __repr__(self) -> str:
         dims = ", ".join(f"{k}={v:.6g}" for k, v in self.dimensions.items()
@@ -278,7 +284,7 @@ def _ipopt(fam: Family, meas: Measure, sign: float, cons: list[Constraint], z0: 
         if not added:
             break
         if time.perf_counter() > deadline:
-            status, message = "iteration_limit", "time limit reached in the exchange step"
+            status, message = TIME_LIMIT, "time limit reached in the exchange step"
             break
     else:
         status, message = "iteration_limit", (f"the exchange step still found violated "
@@ -329,7 +335,7 @@ def optimize(family: Callable[..., Any] | Family, variables: Mapping[str, Any] |
         Differential evolution's population multiplier and generations.
     time_limit : float
         Seconds for the whole call (the search stops, the best design so far is returned
-        with ``status="iteration_limit"``).
+        with ``status="time_limit"``).
     rounds : int
         Exchange rounds of the IPOPT path.
 
@@ -422,7 +428,7 @@ def optimize(family: Callable[..., Any] | Family, variables: Mapping[str, Any] |
         z = zn if res.fun <= f_start else z_start
         used = "global+nelder-mead"
     if time.perf_counter() > deadline:
-        status, message = "iteration_limit", f"time limit of {time_limit:g} s reached"
+        status, message = TIME_LIMIT, f"time limit of {time_limit:g} s reached"
     z = np.asarray(z, dtype=float)
     details: dict[str, Any] = {}
     if hasattr(meas, "result"):
@@ -452,6 +458,9 @@ def optimize(family: Callable[..., Any] | Family, variables: Mapping[str, Any] |
     elif not ok:
         bad = [k for k, v in verification.items() if not v["ok"]]
         status, message = "inaccurate", f"the denser verification fails for {bad}"
+    elif not message:
+        message = (f"{repr(meas)} = {value:.6g} at the design found by {used} "
+                   f"({ctr.n} designs evaluated)")
     return DesignResult(dimensions=fam.dims(z), z=z, value=value, measures=measures,
                         active=active, verification=verification, evaluations=ctr.n,
                         history=ctr.history, method=used, mechanism=fam.mechanism(z),

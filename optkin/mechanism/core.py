@@ -12,6 +12,7 @@ import numpy as np
 from .._checks import as_float, as_int, as_vector
 from .._checks import show as _show
 from ..errors import MechanismError
+from ..results import jsonable
 from .khalil import KhalilTable
 from .legs import Leg, validate_legs
 from .platforms import PLATFORMS
@@ -20,18 +21,6 @@ __all__ = ["Mechanism", "TASK_COMPONENTS"]
 
 #: Pose components an inverse problem may prescribe for a Khalil mechanism.
 TASK_COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
-
-
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    if isinstance(v, (np.floating, np.integer)):
-        return v.item()
-    if isinstance(v, Mapping):
-        return {str(k): _jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    return v
 
 
 class Mechanism:
@@ -360,7 +349,8 @@ class Mechanism:
         geo.setflags(write=False)
         object.__setattr__(self, "_topology", topo)
         object.__setattr__(self, "_geometry", geo)
-        blob = json.dumps(_jsonable(self._spec), sort_keys=True, default=repr).encode()
+        blob = json.dumps(jsonable(self._spec, keep_nonfinite=True), sort_keys=True,
+                          default=repr).encode()
         object.__setattr__(self, "_key", hashlib.sha256(blob).hexdigest()[:16])
 
     # ------------------------------------------------------------------ views
@@ -427,8 +417,9 @@ class Mechanism:
         return self.table.loops if self.kind == "khalil" else len(self.legs) - 1
 
     def to_dict(self) -> dict[str, Any]:
-        """The description as JSON-ready data (echoed in problem results)."""
-        return _jsonable(self._spec)
+        """The description as JSON-ready data (echoed in problem results; unbounded joint
+        limits stay +-inf so that it round-trips)."""
+        return jsonable(self._spec, keep_nonfinite=True)
 
     def __repr__(self) -> str:
         return (

@@ -30,6 +30,7 @@ import casadi as ca
 import numpy as np
 
 from .._cache import KeyedCache
+from .._checks import check_mechanism
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..mechanism.joints import JOINT_TYPES
@@ -53,11 +54,7 @@ _MODELS_LOCK = threading.Lock()
 
 def get_model(mech: Mechanism) -> Model:
     """The model of ``mech``: its topology's Functions with its geometry filled in."""
-    if not isinstance(mech, Mechanism):
-        raise MechanismError(
-            f"expected an optkin Mechanism, got {type(mech).__name__}; build one with "
-            "optkin.mechanisms.* or Mechanism.from_khalil / from_legs"
-        )
+    check_mechanism(mech)
     with _MODELS_LOCK:
         m = _MODELS.get(mech.key)
         if m is not None:

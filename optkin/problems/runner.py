@@ -5,6 +5,15 @@ into a JSON-ready result dict; :func:`run_job` is the picklable entry point used
 process pools and Dask workers (problem bytes in; result dict and PNG bytes out);
 :func:`run_paths` finds problem files, skips those already done (resume), fans the
 rest out, and writes every file atomically.
+
+Task outcomes: the ``status`` of a task in the result JSON and in ``summary.csv`` is the runner's word
+for how the task went (:data:`TASK_OUTCOMES`), not a result's status: ``ok`` (the analysis
+ran and its result says ``success``), ``failed`` (it ran and its result says
+``success=False``; the message is the result's), ``error`` (an exception, a worker that
+died or ran out of time, an output that cannot be stored), ``unavailable`` (a task kind
+this version of optkin does not have); a problem file that cannot be read is one row with
+status ``invalid``. The analysis's own ``success``, ``status`` (one word of
+:data:`optkin.results.STATUS`) and ``message`` are in the task's ``output``.
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ from optkin.problems.workers import DEFAULT_TIME_LIMIT, Job, JobOutcome, run_job
 __all__ = [
     "DEFAULT_TIME_LIMIT",
     "RESULT_FORMAT",
+    "TASK_OUTCOMES",
     "ProblemFileInfo",
     "RunReport",
     "atomic_write",
@@ -61,6 +71,10 @@ __all__ = [
 RESULT_FORMAT = 1
 
 SUMMARY_FIELDS = ["problem", "task", "kind", "name", "status", "passed", "time", "message"]
+
+#: The runner's words for how a task went (a task's ``status`` in the result JSON and
+#: ``summary.csv``; see the module docstring); ``invalid`` marks a file that cannot be read.
+TASK_OUTCOMES = ("ok", "failed", "error", "unavailable", "invalid")
 
 
 # ---------------------------------------------------------------------------
@@ -372,15 +386,9 @@ def _model_warmup(mech: Any) -> tuple[float, str | None]:
 
 
 def clean_json(v: Any) -> Any:
-    """``v`` as strict JSON data: NaN and inf become None, anything else unknown its repr."""
-    v = jsonable(v)
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if isinstance(v, dict):
-        return {str(k): clean_json(x) for k, x in v.items()}
-    if isinstance(v, list):
-        return [clean_json(x) for x in v]
-    return v
+    """``v`` as strict JSON data (:func:`optkin.results.jsonable`: NaN and inf become None,
+    anything else unknown its repr)."""
+    return jsonable(v)
 
 
 def _output_success(output: dict[str, Any]) -> bool:

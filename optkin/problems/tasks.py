@@ -24,6 +24,7 @@ import numpy as np
 from optkin._dryrun import Checked, computing, strict_options, validating
 from optkin.errors import MechanismError
 from optkin.problems.schema import TaskBase
+from optkin.results import jsonable
 
 __all__ = ["TASKS", "OPTIONS", "OptionSpec", "TaskContext", "check_options", "check_task",
            "jsonable", "library_function", "register", "run_task"]
@@ -139,29 +140,6 @@ def library_function(dotted: str, kind: str) -> Callable[..., Any]:
     if not callable(obj):
         raise NotImplementedError(f"task kind {kind!r}: optkin.{dotted} is not callable")
     return obj
-
-
-def jsonable(v: Any) -> Any:
-    """Recursively turn results (``to_dict`` objects, arrays, numpy scalars) into JSON data."""
-    if hasattr(v, "to_dict") and callable(v.to_dict):
-        return jsonable(v.to_dict())
-    if isinstance(v, np.ndarray):
-        return jsonable(v.tolist())
-    if isinstance(v, (np.floating, np.integer, np.bool_)):
-        return jsonable(v.item())
-    if isinstance(v, float):
-        return v if np.isfinite(v) else None
-    if isinstance(v, (str, int, bool)) or v is None:
-        return v
-    if isinstance(v, Mapping):
-        return {str(k): jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple, set, frozenset)):
-        return [jsonable(x) for x in v]
-    if dataclasses.is_dataclass(v) and not isinstance(v, type):
-        return jsonable(dataclasses.asdict(v))
-    if isinstance(v, Path):
-        return str(v)
-    return repr(v)
 
 
 def _vector(v: Any, names: Sequence[str], fill: Sequence[float] | None = None) -> Any:

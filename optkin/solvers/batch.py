@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_float, as_int, as_matrix, as_vector
+from .._checks import as_matrix, as_vector, check_option
 from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..limits import MAX_ITERATIONS, MAX_THREADS, MAX_UNROLL, Deadline, check_sizes, show
@@ -49,7 +49,15 @@ from ..mechanism import Mechanism
 from ..model import Model, fused, get_model
 from ..model import compiled as cc
 from ..model.compiled import FastFn
-from ..results import KinResult, SolverStats, _jsonable
+from ..results import (
+    INFEASIBLE,
+    OPTIMAL,
+    SINGULAR,
+    TIME_LIMIT,
+    KinResult,
+    SolverStats,
+    jsonable,
+)
 from .common import check_mechanism, check_qa, make_result, merge_options, parse_guess, timer
 from .forward import forward
 
@@ -109,15 +117,18 @@ class BatchResult:
         The unknowns (``x_names``) of every solve.
     qa : ndarray (n, na)
         The active joint values, as given.
-    success : ndarray of bool (n,)
+    closed : ndarray of bool (n,)
         Whether max ``|Phi|`` <= tol at each row.
+    success : bool
+        Whether every row closed (``closed.all()``; ``all_success`` is the same).
     residual : ndarray (n,)
         max ``|Phi|`` at each row.
     nit : ndarray of int (n,)
         Newton iterations (corrections) spent on each row.
     status, message : str
         ``"singular"`` when a row is marked in ``crossed``, else ``"optimal"`` when every
-        row closed, else ``"infeasible"``; a sentence naming the first such row.
+        row closed, else ``"infeasible"``; ``"time_limit"`` when the time budget stopped
+        the batch; a sentence naming the first such row.
     stats : SolverStats
         ``extra`` holds ``compiled`` (bool), ``fallback`` (rows re-solved by ``forward``),
         ``chunks`` (compiled calls), ``chunk`` and ``guard_time`` (s).
@@ -145,7 +156,7 @@ class BatchResult:
 
     x: np.ndarray
     qa: np.ndarray
-    success: np.ndarray
+    closed: np.ndarray
     residual: np.ndarray
     nit: np.ndarray
     status: str
@@ -163,7 +174,7 @@ class BatchResult:
 
     def __repr__(self) -> str:
         n = len(self)
-        ok = int(np.sum(self.success))
+        ok = int(np.sum(self.closed))
         worst = float(np.max(self.residual)) if n else 0.0
         marked = int(np.sum(self.crossed))
         cross = f", {marked} crossed" if marked else ""
@@ -171,8 +182,14 @@ class BatchResult:
                 f"max residual={worst:.2e}, solver={self.stats.solver!r})")
 
     @property
+    def success(self) -> bool:
+        """Whether every row closed (rows that did not are False in :attr:`closed`)."""
+        return bool(np.all(self.closed))
+
+    @property
     def all_success(self) -> bool:
-        return bool(np.all(self.success))
+        """The same as :attr:`success`."""
+        return self.success
 
     def result(self, i: int, tol: float = 1e-10) -> KinResult:
         """Row ``i`` as a full :class:`KinResult` (joints, pose, cond(W_p))."""
@@ -196,11 +213,13 @@ class BatchResult:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready dict (NaN and inf entries, e.g. of rows that diverged, become None)."""
-        return _jsonable({
-            "x": self.x.tolist(), "qa": self.qa.tolist(), "success": self.success.tolist(),
+        """A JSON-ready dict (:func:`optkin.results.jsonable`: NaN and inf entries, e.g. of
+        rows that diverged, become None); ``closed`` per row, ``success`` for all."""
+        return jsonable({
+            "success": self.success, "status": self.status, "message": self.message,
+            "x": self.x.tolist(), "qa": self.qa.tolist(), "closed": self.closed.tolist(),
             "residual": self.residual.tolist(), "nit": self.nit.tolist(),
-            "status": self.status, "message": self.message, "stats": self.stats.to_dict(),
+            "stats": self.stats.to_dict(),
             "x_names": list(self.x_names), "det_sign": self.det_sign.tolist(),
             "conditioning": [None if not np.isfinite(c) else float(c)
                              for c in self.conditioning],
@@ -244,16 +263,17 @@ def _bool_opt(opts: dict[str, Any], key: str) -> bool:
 def _batch_options(opts: dict[str, Any]) -> dict[str, Any]:
     w = "forward_batch"
     o = {k: _bool_opt(opts, k) for k in ("path", "fallback", "guard")}
-    o["tol"] = as_float(opts["tol"], f"{w}: option tol", lo=0.0)
-    if not o["tol"] > 0:
-        raise MechanismError(f"{w}: option tol must be a number > 0, got {o['tol']:g}")
-    o["chunk"] = max(1, as_int(opts["chunk"], f"{w}: option chunk", lo=0))
-    o["iters"] = as_int(opts["iters"], f"{w}: option iters", lo=0, hi=MAX_UNROLL)
-    o["max_iter"] = as_int(opts["max_iter"], f"{w}: option max_iter", lo=0, hi=MAX_ITERATIONS)
-    o["threads"] = max(1, as_int(opts["threads"], f"{w}: option threads", lo=0,
-                                 hi=MAX_THREADS))
-    o["jump"] = as_float(opts["jump"], f"{w}: option jump", lo=0.0)
-    o["near"] = as_float(opts["near"], f"{w}: option near", lo=0.0)
+
+    def number(key: str, **bounds: Any) -> Any:
+        return check_option(opts, key, w, BATCH_DEFAULTS, **bounds)
+
+    o["tol"] = number("tol", lo=0.0, lo_open=True)
+    o["chunk"] = max(1, number("chunk", integer=True, lo=0))
+    o["iters"] = number("iters", integer=True, lo=0, hi=MAX_UNROLL)
+    o["max_iter"] = number("max_iter", integer=True, lo=0, hi=MAX_ITERATIONS)
+    o["threads"] = max(1, number("threads", integer=True, lo=0, hi=MAX_THREADS))
+    o["jump"] = number("jump", lo=0.0)
+    o["near"] = number("near", lo=0.0)
     return o
 
 
@@ -293,13 +313,13 @@ def forward_batch(mech: Mechanism, QA: Any, guess: Any = None, **options: Any) -
     (``chunk``) about 100 (nx + na) + 180 np bytes (np entries of the geometry vector, an
     input the tracker repeats for every point); both are checked against the memory budget of
     :mod:`optkin.limits` before solving. When the time budget runs out the rows not yet
-    solved stay NaN, the status is ``"iteration_limit"`` and ``stats.extra["stopped_at"]``
+    solved stay NaN, the status is ``"time_limit"`` and ``stats.extra["stopped_at"]``
     is the first of them.
 
     Returns
     -------
     BatchResult
-        Rows of unknowns, residuals and success flags; ``result(i)`` gives a KinResult.
+        Rows of unknowns, residuals and ``closed`` flags; ``result(i)`` gives a KinResult.
 
     Examples
     --------
@@ -411,7 +431,7 @@ def _finish(model: Model, A, X, R, nit, tol, solver, t0, extra, guard=None,
     ok = np.isfinite(R) & (R <= tol)
     n = A.shape[0]
     nbad = int(n - ok.sum())
-    status = "optimal" if nbad == 0 else "infeasible"
+    status = OPTIMAL if nbad == 0 else INFEASIBLE
     if nbad == 0:
         msg = f"{n} solves closed: max |Phi| = {R.max() if n else 0.0:.2e}"
     else:
@@ -469,10 +489,10 @@ def _finish(model: Model, A, X, R, nit, tol, solver, t0, extra, guard=None,
                 f"{low[j]:.1e} at row {j})")))
         if events:
             msg = ". ".join(t for _, t in sorted(events)) + ". " + msg
-            status = "singular"
+            status = SINGULAR
     if stopped is not None:  # the time budget ran out: the rows from stopped[0] on
         msg = f"{stopped[1]} (rows from {stopped[0]} on were not solved). {msg}"
-        status = "iteration_limit"
+        status = TIME_LIMIT
         extra["stopped_at"] = stopped[0]
     stats = SolverStats(solver, 0.0, timer() - t0, int(nit.sum()), status, extra)
     return BatchResult(X, A, ok, R, nit, status, msg, stats, tuple(model.x_names), model,

@@ -31,6 +31,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import MechanismError
+from ..results import ERROR, INACCURATE, OPTIMAL, SINGULAR, jsonable
 
 __all__ = ["Certificate", "certify", "certify_point"]
 
@@ -49,16 +50,34 @@ class Certificate:
         Half-width of that box in scaled units (radians; lengths / mechanism size).
     message : str
         Why not, when not certified; the contraction achieved otherwise.
+    success, status :
+        As every result (:mod:`optkin.results`): ``success`` is ``certified``; status
+        ``"optimal"`` when certified, ``"singular"`` when W_p is (numerically) singular at
+        the candidate, ``"error"`` when the test does not apply (a non-square or
+        non-finite system, an operation without a ball form), else ``"inaccurate"`` (no
+        box contracted, or the box overlaps another solution's: not proven).
     """
 
     certified: bool
     box: np.ndarray = field(repr=False)
     radius: float
     message: str
+    status: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.status:
+            object.__setattr__(self, "status", OPTIMAL if self.certified else INACCURATE)
+
+    @property
+    def success(self) -> bool:
+        """The same as :attr:`certified`."""
+        return bool(self.certified)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"certified": bool(self.certified), "radius": float(self.radius),
-                "box": self.box.tolist(), "message": self.message}
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        return jsonable({"certified": bool(self.certified), "success": self.success,
+                         "status": self.status, "message": self.message,
+                         "radius": float(self.radius), "box": self.box})
 
 
 # ---------------------------------------------------------------------------------------
@@ -193,9 +212,10 @@ def _program(model) -> BallProgram:
     return topo.cached("certify:program", build)
 
 
-def _fail(x: np.ndarray, r: np.ndarray, scale_r: float, why: str) -> Certificate:
+def _fail(x: np.ndarray, r: np.ndarray, scale_r: float, why: str,
+          status: str = INACCURATE) -> Certificate:
     box = np.c_[x - r, x + r] if np.all(np.isfinite(r)) else np.c_[x, x]
-    return Certificate(False, box, float(scale_r), why)
+    return Certificate(False, box, float(scale_r), why, status)
 
 
 def certify_point(model, qa: np.ndarray, x: np.ndarray, radii=(4.0, 64.0, 1024.0),
@@ -215,9 +235,10 @@ def certify_point(model, qa: np.ndarray, x: np.ndarray, radii=(4.0, 64.0, 1024.0
     if model.topology.m != n:
         return _fail(x, np.full(n, np.nan), float("nan"),
                      f"the closure has {model.topology.m} equations for {n} unknowns: "
-                     "Krawczyk's test needs a square system")
+                     "Krawczyk's test needs a square system", ERROR)
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(qa))):
-        return _fail(x, np.full(n, np.nan), float("nan"), "the candidate is not finite")
+        return _fail(x, np.full(n, np.nan), float("nan"), "the candidate is not finite",
+                     ERROR)
     prog = _program(model)
     p = np.asarray(model.p, dtype=float).ravel()
     scale = np.asarray(model.x_scale, dtype=float).ravel()
@@ -227,10 +248,11 @@ def certify_point(model, qa: np.ndarray, x: np.ndarray, radii=(4.0, 64.0, 1024.0
     try:
         Y = np.linalg.inv(Wp0)
     except np.linalg.LinAlgError:
-        return _fail(x, np.zeros(n), 0.0, "W_p is singular at the candidate")
+        return _fail(x, np.zeros(n), 0.0, "W_p is singular at the candidate", SINGULAR)
     if not np.all(np.isfinite(Y)) or np.linalg.cond(Wp0) > 1e14:
         return _fail(x, np.zeros(n), 0.0,
-                     f"W_p is numerically singular at the candidate (cond {np.linalg.cond(Wp0):.2g})")
+                     f"W_p is numerically singular at the candidate (cond "
+                     f"{np.linalg.cond(Wp0):.2g})", SINGULAR)
     eta = np.abs(Y @ phi0) / scale
     base = max(float(np.max(eta)), floor)
     try:
@@ -262,7 +284,7 @@ def certify_point(model, qa: np.ndarray, x: np.ndarray, radii=(4.0, 64.0, 1024.0
             if rs >= ceiling:
                 break
     except _Unsupported as e:
-        return _fail(x, np.zeros(n), 0.0, f"{e} has no ball form in optkin")
+        return _fail(x, np.zeros(n), 0.0, f"{e} has no ball form in optkin", ERROR)
     box, rs = last
     return Certificate(False, box, rs,
                        f"K(X) is not inside X for half-widths up to {rs:.2g} (scaled): no "

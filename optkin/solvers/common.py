@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import MAX_ABS, as_float, as_matrix, as_vector
+from .._checks import MAX_ABS, as_matrix, as_vector, check_mechanism, check_option
 from .._checks import show as _show
 from .._dryrun import options_strict
 from ..errors import MechanismError, NumericError
@@ -28,8 +28,12 @@ def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: 
 
     An option whose default is a number (tolerances, counts, limits, seeds) must be given
     a real number >= 0 of magnitude at most ``MAX_ABS`` (inf allowed, e.g. to disable a
-    limit), else a :class:`MechanismError` names the option and its default; the value is
-    returned as a float (an int for an integral int). Each function checks its own ranges.
+    limit), else a :class:`MechanismError` names the option and its default
+    (:func:`optkin._checks.check_option`); the value is returned as a float (an int for an
+    integral int). Each function checks its own ranges with ``check_option``.
+
+    This is the one options validator of optkin: every public function that takes
+    ``**options`` merges them here over its module's ``*_DEFAULTS`` mapping.
     """
     out = dict(defaults)
     for k, v in given.items():
@@ -45,14 +49,7 @@ def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: 
             continue
         d = defaults[k]
         if isinstance(d, (int, float)) and not isinstance(d, bool):
-            try:
-                f = as_float(v, f"{where}: option {k}", lo=0.0, finite=False, path=("options", k))
-                if math.isfinite(f) and f > MAX_ABS:
-                    raise MechanismError("too large")
-            except MechanismError:
-                raise MechanismError(
-                    f"{where}: option {k} must be a number >= 0 (default {d!r}), got {_show(v)}",
-                    path=("options", k)) from None
+            f = check_option({k: v}, k, where, defaults, lo=0.0, finite=False)
             v = int(v) if isinstance(d, int) and isinstance(v, (int, np.integer)) else f
         out[k] = v
     return out
@@ -61,25 +58,9 @@ def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: 
 
 def count_option(opts: Mapping[str, Any], name: str, where: str, lo: int, hi: int,
                  defaults: Mapping[str, Any]) -> int:
-    """``opts[name]`` as an integer in [lo, hi], else a MechanismError naming the option."""
-    v = opts[name]
-    if isinstance(v, float) and v.is_integer():
-        v = int(v)
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
-        raise MechanismError(
-            f"{where}: option {name} must be an integer >= {lo} and <= {hi} (default "
-            f"{defaults[name]!r}), got {_show(opts[name])}", path=("options", name))
-    return int(v)
-
-
-def check_mechanism(mech: Any, where: str) -> None:
-    """Raise a MechanismError naming ``where`` unless ``mech`` is an optkin Mechanism."""
-    from ..mechanism import Mechanism
-
-    if not isinstance(mech, Mechanism):
-        raise MechanismError(
-            f"{where}: expected an optkin Mechanism, got {type(mech).__name__}; build one "
-            "with optkin.mechanisms.* or Mechanism.from_khalil / from_legs")
+    """``opts[name]`` as an integer in [lo, hi], else a MechanismError naming the option
+    (:func:`optkin._checks.check_option`)."""
+    return int(check_option(opts, name, where, defaults, integer=True, lo=lo, hi=hi))
 
 
 def check_result_of(mech: Any, r: KinResult, where: str) -> None:

@@ -76,7 +76,6 @@ mechanism (Chablat and Wenger 1998, Definition 4) and, at a pose, which exist.
 from __future__ import annotations
 
 import math
-import numbers
 import time
 import warnings
 from collections.abc import Iterator, Sequence
@@ -86,7 +85,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .._checks import MAX_ABS, as_float, as_int, as_matrix, as_vector
+from .._checks import MAX_ABS, as_matrix, as_vector, check_number, check_option
 from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..limits import (
@@ -104,7 +103,17 @@ from ..mechanism import Mechanism
 from ..model import Model, get_model
 from ..model import enumeration as _enum
 from ..model.compiled import FastFn
-from ..results import EnumerationStats, KinResult, SolutionSet, SolverStats
+from ..results import (
+    INFEASIBLE,
+    LIMIT_REACHED,
+    OPTIMAL,
+    TIME_LIMIT,
+    EnumerationStats,
+    KinResult,
+    SolutionSet,
+    SolverStats,
+    jsonable,
+)
 from .common import (
     check_mechanism,
     check_qa,
@@ -560,17 +569,21 @@ def _guess_arg(guess: Any, where: str = "guess") -> Any:
         return as_vector(guess, where)
 
 
+def _defaults_of(where: str) -> dict[str, Any]:
+    return TRACK_DEFAULTS if where == "track" else ASSEMBLY_DEFAULTS
+
+
 def _opt_float(opts: dict[str, Any], key: str, where: str, *, lo: float = 0.0,
                hi: float | None = None, positive: bool = False) -> float:
-    v = as_float(opts[key], f"{where}: option {key}", lo=lo, hi=hi)
-    if positive and not v > 0:
-        raise MechanismError(f"{where}: option {key} must be a number > 0, got {v:g}")
-    return v
+    """The option ``key`` of ``where`` as a finite float in [lo, hi] (> lo when
+    ``positive``): :func:`optkin._checks.check_option`."""
+    return check_option(opts, key, where, _defaults_of(where), lo=lo, hi=hi, lo_open=positive)
 
 
 def _opt_int(opts: dict[str, Any], key: str, where: str, *, lo: int = 0,
              hi: int | None = MAX_ITERATIONS) -> int:
-    return as_int(opts[key], f"{where}: option {key}", lo=lo, hi=hi)
+    """The option ``key`` of ``where`` as an integer in [lo, hi]."""
+    return check_option(opts, key, where, _defaults_of(where), integer=True, lo=lo, hi=hi)
 
 
 def _opt_auto(opts: dict[str, Any], key: str, where: str, conv) -> Any:
@@ -612,11 +625,11 @@ def _assembly_options(opts: dict[str, Any], model: Model, given_time: bool = Tru
     o["tol"] = _opt_float(opts, "tol", w, positive=True)
     o["starts"] = _opt_int(opts, "starts", w, lo=1, hi=None)
     o["min_starts"] = _opt_auto(opts, "min_starts", w,
-                                lambda v: as_int(v, f"{w}: option min_starts", lo=0))
+                                lambda v: _opt_int({"min_starts": v}, "min_starts", w, hi=None))
     o["target"] = _opt_float(opts, "target", w)
     o["target_upper"] = _opt_float(opts, "target_upper", w)
     tb = time_budget()
-    tl = as_float(opts["time_limit"], f"{w}: option time_limit", lo=0.0, finite=False)
+    tl = check_option(opts, "time_limit", w, ASSEMBLY_DEFAULTS, lo=0.0, finite=False)
     if not given_time:
         tl = min(tl, tb)
     if tl > tb:
@@ -631,7 +644,7 @@ def _assembly_options(opts: dict[str, Any], model: Model, given_time: bool = Tru
         raise MechanismError(f"{w}: option bound must be 'auto', None or an integer >= 0 "
                              f"(the known largest number of assembly modes), got {show(b)}")
     else:
-        o["bound"] = as_int(b, f"{w}: option bound", lo=0)
+        o["bound"] = _opt_int(opts, "bound", w, hi=None)
     wd = opts["width"]
     if isinstance(wd, str) and wd == "auto":
         o["width"] = wd
@@ -639,7 +652,7 @@ def _assembly_options(opts: dict[str, Any], model: Model, given_time: bool = Tru
         if isinstance(wd, str):
             raise MechanismError(f"{w}: option width must be a power of 2 or 'auto', got "
                                  f"{show(wd)}")
-        wd = as_int(wd, f"{w}: option width", lo=1)
+        wd = _opt_int(opts, "width", w, lo=1, hi=None)
         if wd & (wd - 1):
             raise MechanismError(f"{w}: option width must be a power of 2 or 'auto', got "
                                  f"{show(wd)}")
@@ -880,7 +893,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         ``estimated_total`` (Chao1), ``bound`` and ``complete`` (True when the count reached
         the known bound), ``stop_reason``, ``time`` and ``setup_time`` (compilation);
         ``success``, ``status`` and ``message`` (also at the top level of ``to_dict()``):
-        no mode found is ``success=False``, status ``"infeasible"`` (``"iteration_limit"``
+        no mode found is ``success=False``, status ``"infeasible"`` (``"time_limit"``
         when the time limit stopped the search), and the message says that no closed
         configuration exists for these actuated values.
 
@@ -894,13 +907,8 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     """
     opts = merge_options(ASSEMBLY_DEFAULTS, options, "assembly_modes")
     check_mechanism(mech, "assembly_modes")
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (numbers.Integral, float)):
-        raise MechanismError(f"assembly_modes: seed must be an integer >= 0, got {show(seed)}")
-    try:
-        seed = as_int(seed, "assembly_modes: seed", lo=0, hi=2**63 - 1)
-    except MechanismError:
-        raise MechanismError(f"assembly_modes: seed must be an integer >= 0 (below 2**63), "
-                             f"got {show(seed)}") from None
+    seed = check_number(seed, "assembly_modes: seed", integer=True, lo=0, hi=2**63 - 1,
+                        default=0, path=("seed",))
     model = get_model(mech)
     _check_size_of(model, "assembly_modes")
     qa = _qa_arg(model, qa)
@@ -917,7 +925,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
                                time_limit=o["time_limit"], _checked=True)
         if o["method"] == "auto" and not (len(modes) and modes.complete
                                           and modes.info["singular_near_real"] == 0
-                                          and modes.info["status"] != "iteration_limit"):
+                                          and modes.info["status"] not in LIMIT_REACHED):
             tried = modes.info["message"]  # the multistart accounts for it (and continua)
         else:
             if o["certify"] and len(modes):
@@ -1185,7 +1193,7 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         success = all(s.success for s in out)
         status = "singular"
     elif not out:
-        status = "iteration_limit" if stop == "time_limit" else "infeasible"
+        status = TIME_LIMIT if stop == "time_limit" else INFEASIBLE
         tried = f"none of {done} starts closed the loops (stopped by {stop})"
         msg = (_NO_MODE + tried if stop != "time_limit" else
                "no closed configuration found for these actuated values within the time "
@@ -1400,7 +1408,7 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
     Memory and time: each path point costs about 6000 + 150 (nq + nx) bytes (its
     KinResult and JSON; 6.2 KB measured for a five-bar), checked against the memory budget
     of :mod:`optkin.limits` before tracking (``len(qa_path)``). When the time budget runs
-    out, the path stops there with status ``"iteration_limit"``.
+    out, the path stops there with status ``"time_limit"``.
 
     Returns
     -------
@@ -1486,7 +1494,7 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
         while s < 1.0:
             if deadline.expired():
                 stopped, s_stop, qa_stop = k, s, qa_prev + s * dqa
-                status, msg = "iteration_limit", deadline.message("track") + (
+                status, msg = TIME_LIMIT, deadline.message("track") + (
                     f": stopped at s = {s:.4f} of the segment from qa_path[{k - 1}] to "
                     f"qa_path[{k}]")
                 break
@@ -1604,12 +1612,20 @@ class WorkingModes:
     existing : dict or None
         At ``pose``: sign pattern -> the :class:`KinResult` of that posture (from
         :func:`optkin.inverse`); patterns absent here do not reach the pose.
+    success, status, message :
+        As every result (:mod:`optkin.results`). The sign patterns follow from the legs,
+        so the answer is always there (``success`` True, status ``"optimal"``), also at a
+        pose no posture reaches (``existing`` empty: the message says so); at a pose,
+        status ``"time_limit"`` (``success`` False) when the inverse model was cut short.
     """
 
     modes: list[tuple[int, ...]]
     legs: list[str]
     pose: np.ndarray | None = None
     existing: dict[tuple[int, ...], KinResult] | None = field(default=None)
+    success: bool = True
+    status: str = OPTIMAL
+    message: str = ""
 
     def __len__(self) -> int:
         return len(self.modes)
@@ -1627,14 +1643,17 @@ class WorkingModes:
         return f"WorkingModes({self.summary()})"
 
     def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = dict(count=len(self.modes), modes=[list(m) for m in self.modes],
-                                   legs=list(self.legs), summary=self.summary(), success=True)
+        """A JSON-ready dict (:func:`optkin.results.jsonable`)."""
+        out: dict[str, Any] = dict(success=bool(self.success), status=self.status,
+                                   message=self.message or self.summary(),
+                                   count=len(self.modes), modes=[list(m) for m in self.modes],
+                                   legs=list(self.legs), summary=self.summary())
         if self.existing is not None:
-            out["pose"] = None if self.pose is None else np.asarray(self.pose).tolist()
+            out["pose"] = self.pose
             out["existing"] = [list(m) for m in self.existing]
-            out["postures"] = [r.to_dict() for r in self.existing.values()]
+            out["postures"] = list(self.existing.values())
             out["count_at_pose"] = len(self.existing)
-        return out
+        return jsonable(out)
 
 
 def working_modes(mech: Mechanism, pose: Any = None) -> WorkingModes:
@@ -1673,6 +1692,7 @@ def working_modes(mech: Mechanism, pose: Any = None) -> WorkingModes:
         checkpoint()  # validation stops here: every argument is checked
     modes = [tuple(int(v) for v in m) for m in model.working_modes()]
     wm = WorkingModes(modes, list(model.leg_labels))
+    wm.message = f"{len(modes)} working modes of the legs {list(model.leg_labels)}"
     if pose is not None:
         from .inverse import inverse
 
@@ -1686,5 +1706,9 @@ def working_modes(mech: Mechanism, pose: Any = None) -> WorkingModes:
         for s in sols:
             if s.working_mode is not None and s.working_mode not in wm.existing:
                 wm.existing[tuple(s.working_mode)] = s
+        wm.message = (f"{len(modes)} working modes; {len(wm.existing)} reach the pose"
+                      + ("" if wm.existing else f" ({sols.message})"))
+        if sols.status in LIMIT_REACHED:  # the postures at the pose are not all known
+            wm.success, wm.status = False, sols.status
     return wm
 

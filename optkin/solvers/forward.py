@@ -6,14 +6,23 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_float
+from .._checks import check_option
 from .._checks import show as _show
 from .._dryrun import checkpoint
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
 from ..results import KinResult, SolverStats, ipopt_status
-from .common import check_qa, count_option, make_result, merge_options, newton, parse_guess, timer
+from .common import (
+    check_mechanism,
+    check_qa,
+    count_option,
+    make_result,
+    merge_options,
+    newton,
+    parse_guess,
+    timer,
+)
 
 __all__ = ["forward", "FORWARD_DEFAULTS"]
 
@@ -63,11 +72,12 @@ def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinR
     (True, True)
     """
     opts = merge_options(FORWARD_DEFAULTS, options, "forward")
+    check_mechanism(mech, "forward")
     model = get_model(mech)
     model.note_use()  # compiles the model's Functions once it is in heavy use
     qa = check_qa(model, qa)
     x0 = parse_guess(model, qa, guess)
-    tol = _option_number(opts, "tol", 0.0)
+    tol = check_option(opts, "tol", "forward", FORWARD_DEFAULTS, lo=0.0, lo_open=True)
     max_iter, polish = (count_option(opts, k, "forward", 0, MAX_ITER, FORWARD_DEFAULTS)
                         for k in ("max_iter", "polish"))
     method = opts["method"]
@@ -112,16 +122,3 @@ def forward(mech: Mechanism, qa: Any, guess: Any = None, **options: Any) -> KinR
     return make_result(model, qa, x, tol, nit + npol, stats, status, msg)
 
 
-def _option_number(opts: dict[str, Any], name: str, above: float) -> float:
-    """``opts[name]`` as a finite float greater than ``above``, else a MechanismError."""
-    v = opts[name]
-    try:
-        f = as_float(v, name)
-    except MechanismError:
-        f = float("nan")
-    if not np.isfinite(f) or f <= above:
-        what = "a positive number" if above == 0 else "a non-negative number"
-        raise MechanismError(
-            f"forward: option {name} must be {what} (default {FORWARD_DEFAULTS[name]!r}), "
-            f"got {_show(v)}", path=("options", name))
-    return f

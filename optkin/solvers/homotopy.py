@@ -70,7 +70,15 @@ import numpy as np
 
 from ..errors import MechanismError
 from ..model import enumeration as _enum
-from ..results import EnumerationStats, KinResult, SolutionSet, SolverStats
+from ..results import (
+    INFEASIBLE,
+    OPTIMAL,
+    TIME_LIMIT,
+    EnumerationStats,
+    KinResult,
+    SolutionSet,
+    SolverStats,
+)
 
 __all__ = ["StartSystem", "start_system", "load_or_build_start", "homotopy_modes"]
 
@@ -1182,9 +1190,9 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
 
     ``time_limit`` (s) bounds the tracking; building a start system gets at least 60 s
     or the time budget (:func:`optkin.limits.time_budget`) when smaller. Out of time, the
-    result says so (status ``"iteration_limit"``, ``complete`` False) and a start system
+    result says so (status ``"time_limit"``, ``complete`` False) and a start system
     cut short is neither stored nor reused."""
-    from ..analysis.continuation import check_number
+    from .._checks import check_number
     from ..limits import Deadline, time_budget
     from ..model import get_model
     from .common import check_mechanism, check_qa, make_result, newton
@@ -1197,7 +1205,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     sys = _system(model)
     tr = _tracker(model)
     budget = (time_budget() if time_limit is None else
-              min(check_number("time_limit", time_limit, strict=True), time_budget()))
+              min(check_number(time_limit, "time_limit", lo=0.0, lo_open=True), time_budget()))
     def exact_start():  # this pattern's own: stored, or built by monodromy now
         key = ("homotopy:start", int(seed), structural(model))
         S = model.topology.cached(key, lambda: load_or_build_start(
@@ -1309,7 +1317,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
               f"(trace test residual {start.trace:.1e}): some modes may be missing"
               if unverified else "")
            + (f"; tracking stopped at the time limit of {budget:g} s" if late else ""))
-    status = "iteration_limit" if late or cut else "optimal" if out else "infeasible"
+    status = TIME_LIMIT if late or cut else OPTIMAL if out else INFEASIBLE
     info = {"success": bool(out) and not (late or cut), "status": status,
             "message": msg, "complete": complete, "root_count": start.root_count,
             "bound": bound,

@@ -15,16 +15,24 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import check_option
 from .._dryrun import checkpoint
-from ..errors import MechanismError
 from ..limits import Deadline
 from ..mechanism import Mechanism
 from ..mechanism.geometry import wrap_angle
 from ..mechanism.tasks import as_pose
 from ..model import Model, get_model
 from ..model.inverse import ClosedPart, SearchPart
-from ..results import EnumerationStats, KinResult, SolutionSet, SolverStats
-from .common import count_option, make_result, merge_options, newton, timer
+from ..results import (
+    INFEASIBLE,
+    OPTIMAL,
+    TIME_LIMIT,
+    EnumerationStats,
+    KinResult,
+    SolutionSet,
+    SolverStats,
+)
+from .common import check_mechanism, count_option, make_result, merge_options, newton, timer
 from .enumerate import _sobol
 
 __all__ = ["inverse", "INVERSE_DEFAULTS", "distinct"]
@@ -69,10 +77,8 @@ def inverse(mech: Mechanism, pose: Any, **options: Any) -> SolutionSet:
     opts = merge_options(INVERSE_DEFAULTS, options, "inverse")
     for k, lo, hi in (("starts", 1, MAX_STARTS), ("iters", 0, MAX_ITERS), ("seed", 0, 2**63 - 1)):
         opts[k] = count_option(opts, k, "inverse", lo, hi, INVERSE_DEFAULTS)
-    if not np.isfinite(opts["tol"]):
-        raise MechanismError(f"inverse: option tol must be a finite number >= 0 (default "
-                             f"{INVERSE_DEFAULTS['tol']!r}), got {opts['tol']!r}",
-                             path=("options", "tol"))
+    opts["tol"] = check_option(opts, "tol", "inverse", INVERSE_DEFAULTS, lo=0.0)
+    check_mechanism(mech, "inverse")
     model = get_model(mech)
     T = as_pose(mech, pose)
     checkpoint()  # validation stops here: every argument is checked
@@ -117,7 +123,7 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
             if not sols:
                 label = model.leg_labels[part.leg]
                 return SolutionSet([], "postures", {
-                    "success": False,
+                    "success": False, "status": INFEASIBLE,
                     "message": f"leg {part.leg + 1} ({label}) cannot reach this pose"})
             per_part.append([_patch(nq, part.q, q_) for q_ in sols])
         else:
@@ -128,7 +134,7 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
             if not sols and part.leg >= 0:
                 label = model.leg_labels[part.leg]
                 return SolutionSet([], "postures", {
-                    "success": False, "starts": runs,
+                    "success": False, "status": INFEASIBLE, "starts": runs,
                     "message": f"leg {part.leg + 1} ({label}) cannot reach this pose "
                                f"({n} starts)"})
             per_part.append(sols)
@@ -179,11 +185,14 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
         msg += f" from {runs} starts ({converged} converged; {method})"
     if outside:
         msg += f"; {outside} outside the joint limits left out"
-    info: dict[str, Any] = {"success": bool(out), "message": msg}
+    if not out:
+        msg += "; no posture reaches this pose" + (" within the joint limits" if outside else "")
+    info: dict[str, Any] = {"success": bool(out), "status": OPTIMAL if out else INFEASIBLE,
+                            "message": msg}
     if searched:
         info.update(starts=runs, converged=converged, method=method, outside_limits=outside)
     if deadline.expired():  # the enumeration was cut short: say so, never claim success
-        info.update(success=False, status="time_limit",
+        info.update(success=False, status=TIME_LIMIT,
                     message=deadline.message("inverse") + f"; {info['message']}")
     n_sing = sum(1 for r_ in out if not r_.cond <= 1e8)
     if searched:  # a numerical search: every start accounted for, completeness unproven

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .. import numeric
-from .._checks import MAX_ABS, as_int, as_matrix, as_vector, show
+from .._checks import MAX_ABS, as_int, as_matrix, as_vector, check_option, show
 from .._dryrun import checkpoint, computing
 from ..errors import NumericError, StaticsError
 from ..limits import Deadline
@@ -73,15 +73,13 @@ def _options(options: Mapping[str, Any], where: str) -> dict[str, Any]:
                             f"{STATICS_DEFAULTS[name]!r}), got {show(opts[name])}",
                             path=("options", name))
 
-    if not 0 <= opts["sing_tol"] < 1:
-        raise bad("sing_tol", "a number in [0, 1)")
-    if not (np.isfinite(opts["cap"]) and opts["cap"] > 0):
-        raise bad("cap", "a finite number > 0")
-    if not np.isfinite(opts["dir_tol"]):
-        raise bad("dir_tol", "a finite number >= 0")
-    if not (float(opts["chunk"]).is_integer() and 1 <= opts["chunk"] <= 4096):
-        raise bad("chunk", "an integer in [1, 4096]")
-    opts["chunk"] = int(opts["chunk"])
+    def number(name: str, **bounds: Any) -> Any:
+        return check_option(opts, name, where, STATICS_DEFAULTS, error=StaticsError, **bounds)
+
+    opts["sing_tol"] = number("sing_tol", lo=0.0, hi=1.0, hi_open=True)
+    opts["cap"] = number("cap", lo=0.0, lo_open=True)
+    opts["dir_tol"] = number("dir_tol", lo=0.0)
+    opts["chunk"] = number("chunk", integer=True, lo=1, hi=4096)
     if not isinstance(opts["reuse"], (bool, int, np.bool_)) or opts["reuse"] not in (True, False):
         raise bad("reuse", "True or False")
     solver = opts["solver"]

@@ -69,13 +69,13 @@ from typing import Any
 import numpy as np
 
 from .. import numeric
-from .._checks import as_float, as_vector
+from .._checks import as_vector, check_mechanism, check_number
 from .._checks import show as _show
 from ..errors import MechanismError, NumericError, StaticsError
 from ..mechanism import Mechanism
 from ..model import Model, get_model
 from ..model import statics as ms
-from ..results import KinResult, _jsonable
+from ..results import KinResult, jsonable
 
 __all__ = ["StaticModel", "static_model", "wrench_names"]
 
@@ -101,10 +101,7 @@ def wrench_names(mech: Mechanism) -> tuple[str, ...]:
     >>> wrench_names(optkin.mechanisms.five_bar(2.0, 1.5, 2.0, 2.0, 1.5))
     ('fx', 'fy')
     """
-    if not isinstance(mech, Mechanism):
-        raise MechanismError(
-            f"mech: expected an optkin Mechanism, got {type(mech).__name__}; build one with "
-            "optkin.mechanisms.* or Mechanism.from_khalil / from_legs")
+    check_mechanism(mech, "mech")
     return ms.wrench_names(get_model(mech))
 
 
@@ -191,7 +188,7 @@ class StaticModel:
         def arr(a):
             return None if a is None else np.asarray(a).tolist()
 
-        return _jsonable({
+        return jsonable({
             "A": arr(self.A), "B": arr(self.B), "P": arr(self.P), "G": arr(self.G),
             "J": arr(self.J), "wrench_names": list(self.wrench_names),
             "actuator_names": list(self.actuator_names),
@@ -280,12 +277,9 @@ def static_model(mech: Mechanism, q: Any, sing_tol: float = SING_TOL) -> StaticM
     >>> sm.singularity, np.round(np.abs(sm.unresisted.ravel()), 12).tolist()
     ('parallel', [0.0, 0.0, 1.0])
     """
-    try:
-        sing_tol = as_float(sing_tol, "sing_tol", lo=0.0, hi=1.0, error=StaticsError,
-                            path=("sing_tol",))
-    except StaticsError:
-        raise StaticsError(f"sing_tol: expected a number in [0, 1] (default {SING_TOL:g}), got "
-                           f"{_show(sing_tol)}", path=("sing_tol",)) from None
+    sing_tol = check_number(sing_tol, "static_model: sing_tol", lo=0.0, hi=1.0,
+                            default=SING_TOL, error=StaticsError, path=("sing_tol",))
+    check_mechanism(mech, "static_model")
     model = get_model(mech)
     qa, x = _config(model, q)
     names = ms.wrench_names(model)

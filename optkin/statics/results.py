@@ -7,34 +7,21 @@ from typing import Any
 
 import numpy as np
 
-from ..results import SolverStats
+from ..results import SolverStats, jsonable
 
 __all__ = ["CapabilityResult", "PolytopeResult", "FeasibilityResult", "WorkspaceResult",
            "DistributionResult"]
 
 
-def _j(v: Any) -> Any:
-    if isinstance(v, np.ndarray):
-        if np.issubdtype(v.dtype, np.inexact):  # floating or complex
-            return [_j(x) for x in v.tolist()] if v.ndim else _j(float(v))
-        return v.tolist()
-    if isinstance(v, (np.floating, float)):
-        f = float(v)
-        return f if np.isfinite(f) else None
-    if isinstance(v, (np.integer, np.bool_)):
-        return v.item()
-    if isinstance(v, dict):
-        return {str(k): _j(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_j(x) for x in v]
-    if hasattr(v, "to_dict"):
-        return v.to_dict()
-    return v
-
-
 class _Result:
+    """What the statics results share: ``to_dict`` (every field, as JSON data by
+    :func:`optkin.results.jsonable`) and a one-line ``repr``. Each has ``success``,
+    ``status`` (:data:`optkin.results.STATUS`; the solver's own word is
+    ``stats.raw_status``) and ``message``, as every result of optkin."""
+
     def to_dict(self) -> dict[str, Any]:
-        return {k: _j(getattr(self, k)) for k in self.__dataclass_fields__}  # type: ignore[attr-defined]
+        """A JSON-ready dict of every field (NaN and inf become None)."""
+        return {k: jsonable(getattr(self, k)) for k in self.__dataclass_fields__}  # type: ignore[attr-defined]
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(success={self.success}, status={self.status!r})"  # type: ignore[attr-defined]
