@@ -370,7 +370,9 @@ def singular_values(mech: Mechanism, points: Any, mode: Any = None,
 # --------------------------------------------------------------------------- integrals
 @dataclass
 class Integral:
-    """A region integral: ``value`` the measure (GCI or area), ``area`` the region's area,
+    """A region integral of a measure, with its account.
+
+    ``value`` the measure (GCI or area), ``area`` the region's area,
     ``reachable`` the fraction of the region's area the mechanism reaches in the working
     mode (and within limits), ``nodes`` the quadrature points used; ``success``,
     ``status`` and ``message`` as every result (:mod:`optkin.results`): ``"infeasible"``

@@ -265,8 +265,9 @@ class JointRange(_RegionMeasure):
 
 class LargestInscribed(Measure):
     """The largest singularity-free disc (radius) or square (half side) of one working mode
-    and aspect, with conditioning floor and limits: :func:`optkin.design.
-    largest_inscribed` per design (not smooth in the dimensions)."""
+    and aspect, with conditioning floor and limits.
+
+    :func:`optkin.design.largest_inscribed` per design (not smooth in the dimensions)."""
 
     name = "largest inscribed"
 
