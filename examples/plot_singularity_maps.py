@@ -2,7 +2,7 @@
 Singularity maps: distance to singularities over a slice
 ========================================================
 
-:func:`optkin.analysis.singularity_map` samples a grid over two coordinates. These are
+:func:`optkin.singularity_map` samples a grid over two coordinates. These are
 task coordinates for a platform (solved leg by leg in one working mode) or active joints
 for a Khalil table (solved by the direct model with warm starts). At every grid point it
 evaluates the margins of :func:`optkin.classify`: ``parallel`` (smallest singular value
@@ -18,7 +18,6 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import optkin
-from optkin.analysis import singularity_map
 
 # %%
 # The five-bar over its workspace
@@ -30,31 +29,20 @@ from optkin.analysis import singularity_map
 # parallel curves of this working mode, and the serial margin vanishes on the boundary
 # circles of the workspace.
 #
-# ``optkin.plot_singularity_map(mech, u, v, path)`` samples the same map and writes it
-# straight to a PNG file. Here the :class:`~optkin.analysis.SingularityMap` it would
-# draw is drawn into our own Axes instead.
+# :meth:`SingularityMap.plot <optkin.SingularityMap.plot>` draws one measure into our
+# own Axes (``optkin.plot_singularity_map(mech, u, v, path)`` samples and draws in one
+# call).
 five = optkin.mechanisms.five_bar(9, 8, 5, 5, 8)
 mode = (1, -1)
-sm = singularity_map(five, np.linspace(-5, 14, 34), np.linspace(0.2, 12.8, 23),
+sm = optkin.singularity_map(five, np.linspace(-5, 14, 34), np.linspace(0.2, 12.8, 23),
                      working_mode=mode)
 print(sm, "-", sm.message)
 curves = optkin.singular_curves(five, plane="workspace", kind=["parallel", "serial"])
 
 
-def show(ax, sm, measure, label):
-    """log10 of one measure of the map, unreachable points left blank."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        Z = np.log10(np.maximum(sm.values[measure], 1e-16))
-    mesh = ax.pcolormesh(sm.u, sm.v, np.ma.masked_invalid(Z), shading="nearest",
-                         cmap="viridis", vmin=-3, vmax=0, rasterized=True)
-    plt.colorbar(mesh, ax=ax, shrink=0.72, label=f"log10 {label}", extend="min")
-    ax.set_xlabel(sm.axes[0])
-    ax.set_ylabel(sm.axes[1])
-
-
 fig, axs = plt.subplots(1, 2, figsize=(12.5, 4.1))
 for ax, measure in zip(axs, ("parallel", "serial")):
-    show(ax, sm, measure, f"{measure} margin")
+    sm.plot(measure, ax=ax)
     for c in curves.curves:
         if not c.kind.startswith(measure):
             continue
@@ -82,7 +70,7 @@ fig.tight_layout()
 # :func:`optkin.classify`, not from the elbow.
 sr = optkin.mechanisms.sr400()
 g = np.linspace(-1.5, 1.5, 18)
-sm_sr = singularity_map(sr, g, g, axes=("theta2", "theta7"), fixed={"theta5": 0.8})
+sm_sr = optkin.singularity_map(sr, g, g, axes=("theta2", "theta7"), fixed={"theta5": 0.8})
 print(sm_sr, "-", sm_sr.message)
 # the passive joints (theta3, theta8, theta9) of the parallelogram closure as the guess
 r = optkin.forward(sr, [0, 0.4, 0, 0.8, 0, 0.1], guess=[np.pi / 2 - 0.3, 0.3, -np.pi - 0.3])
@@ -90,7 +78,7 @@ theta3 = dict(zip(sr.joint_names, r.q))["theta3"]
 print(f"theta3 at theta2 = 0.4, theta7 = 0.1: {theta3:.12f} = pi/2 - 0.3: "
       f"{np.pi / 2 - 0.3:.12f}")
 fig, ax = plt.subplots(figsize=(6.8, 5.4))
-show(ax, sm_sr, "distance", "distance to a singularity")
+sm_sr.plot("distance", ax=ax)
 ax.plot(g, g, "--", color="tab:red", lw=1.4, label=r"$\theta_3 = \pi/2$ (elbow stretched)")
 ax.set_aspect("equal")
 ax.set_xlabel(r"$\theta_2$ (rad)")

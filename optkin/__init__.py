@@ -29,6 +29,8 @@ _LAZY: dict[str, str] = {
     "dof": "optkin.analysis",
     "jacobians": "optkin.analysis",
     "plot_singularity_map": "optkin.analysis",
+    "singularity_map": "optkin.analysis",
+    "SingularityMap": "optkin.analysis",
     "Aspects": "optkin.analysis.aspects",
     "Workspace": "optkin.analysis.aspects",
     "aspects": "optkin.analysis.aspects",
@@ -81,6 +83,7 @@ __all__ = [
     "ProblemFileError",
     "SingularCurves",
     "SingularSurface",
+    "SingularityMap",
     "SingularityReport",
     "SolutionSet",
     "SolverError",
@@ -106,6 +109,7 @@ __all__ = [
     "mode_change_path",
     "plot",
     "plot_singularity_map",
+    "singularity_map",
     "singular_curves",
     "singular_surfaces",
     "statics",
@@ -139,11 +143,13 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     from .analysis import (
         DofReport,
         Jacobians,
+        SingularityMap,
         SingularityReport,
         classify,
         dof,
         jacobians,
         plot_singularity_map,
+        singularity_map,
     )
     from .analysis.aspects import Aspects, Workspace, aspects, workspace
     from .analysis.aspects3d import Aspects3D, aspects3d

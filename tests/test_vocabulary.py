@@ -12,6 +12,7 @@ among the classes that are not results, and a new public function must be driven
 from __future__ import annotations
 
 import dataclasses
+import functools
 import inspect
 import json
 import pathlib
@@ -135,11 +136,14 @@ def walk(tmp_path_factory) -> Walk:
     call(f"{ok}.workspace", "five-bar", five)
     call(f"{ok}.plot_singularity_map", "five-bar", five, np.linspace(-2, 2, 2),
          np.linspace(6, 10, 2), str(tmp_path_factory.mktemp("map") / "map.png"))
+    call(f"{ok}.singularity_map", "five-bar", five, np.linspace(-2, 2, 2), np.linspace(6, 10, 2))
     call(f"{ok}.aspects3d", "3-RPR", rpr, slices=4, time_limit=2)
     call(f"{ok}.singular_surfaces", "3-RPR", rpr, slices=4, time_limit=2)
     call(f"{ok}.cusp_curves", "3-RPR", rpr, slices=2, time_limit=2)
     call(f"{ok}.is_cuspidal", "3-RPR, stopped", rpr, sections=[1.0], angles=1, time_limit=1)
     call(f"{ok}.mode_change_path", "3-RPR, other aspect", rpr, r.qa, 0, 1, time_limit=2)
+    cusp = M.rpr3([[0, 0], [15.91, 0], [0, 10]], [[0, 0], [17.04, 0], [13.2364, 16.0967]])
+    call(f"{ok}.mode_change_path", "cuspidal 3-RPR", cusp, [14.98, 13.85, 6.77], 1, 2)
     # statics
     st = "optkin.statics"
     wset = {"lower": [0, 0, -0.1], "upper": [0, 0, 0.1]}
@@ -238,8 +242,7 @@ def test_every_public_function_is_driven_and_every_result_class_met(walk):
     met = {type(r) for _, r in walk.results}
     missing = [k for k, c in RESULT_CLASSES.items() if c not in met]
     assert not missing, f"result classes no call returned: {missing}"
-    # classes returned but not public (the SingularityMap of plot_singularity_map) keep it
-    # too, and every function that returns no result is listed with what it returns
+    # every function that returns no result is listed with what it returns
     assert set(walk.other) == set(NOT_RESULT_RETURNS)
     for name in walk.other:
         assert getattr(walk.other[name], "status", None) is None, name
@@ -340,3 +343,56 @@ def test_one_json_converter():
     r = optkin.forward(M.four_bar(1.0, 2.0, 2.0, 2.5), [1.0])
     assert results.jsonable(r) == r.to_dict()
     assert isinstance(OptkinError("x"), Exception)
+
+
+def test_every_picture_draws_into_the_callers_figure_and_writes_only_when_asked(
+        walk, tmp_path, monkeypatch):
+    """Each result with a ``plot`` (and the statics plots) takes ``ax=`` (or ``fig=`` for
+    pictures of several panels), returns that Figure and writes no file; given a path it
+    writes one and leaves no figure in pyplot."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
+
+    monkeypatch.chdir(tmp_path)
+    plots: dict[type, Any] = {}
+    for _, res in walk.results:
+        if hasattr(res, "plot") and (type(res) not in plots or res.success):
+            plots[type(res)] = res.plot
+    for name in ("plot_capability", "plot_workspace"):
+        fn = getattr(statics, name)
+        res = walk.other[name]
+        # the statics plots take the result they draw: drawn again from it
+        source = [r for _, r in walk.results if type(r).__name__ == (
+            "CapabilityResult" if name == "plot_capability" else "WorkspaceResult")][0]
+        assert res is not None
+        plots[fn] = functools.partial(fn, source)
+    with_plot = {c for c in RESULT_CLASSES.values() if hasattr(c, "plot")}
+    assert with_plot <= set(plots), f"results with a plot not drawn here: {with_plot - set(plots)}"
+    assert len(plots) >= 12
+    for key, plot in plots.items():
+        label = getattr(key, "__name__", str(key))
+        open_before = set(plt.get_fignums())
+        probe = plot()  # a new Figure, in pyplot (for notebooks and plt.show())
+        assert isinstance(probe, Figure), label
+        three_d = any(getattr(a, "name", "") == "3d" for a in probe.axes)
+        plt.close(probe)
+        params = inspect.signature(getattr(key, "plot", plot)).parameters
+        mine = Figure(layout="constrained")
+        if "ax" in params or callable(key) and not inspect.isclass(key):
+            ax = mine.add_subplot(projection="3d" if three_d else None)
+            got = plot(ax=ax)
+            assert ax in got.axes, label
+        else:
+            assert "fig" in params, f"{label}.plot takes neither ax= nor fig="
+            got = plot(fig=mine)
+            assert mine.axes, label
+        assert got is mine, label
+        assert not list(tmp_path.iterdir()), f"{label} wrote a file without a path"
+        out = tmp_path / f"{label}.png"
+        written = plot(path=str(out))
+        assert isinstance(written, Figure) and out.stat().st_size > 1000, label
+        assert set(plt.get_fignums()) == open_before, f"{label} left a pyplot figure"
+        out.unlink()

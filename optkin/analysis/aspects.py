@@ -169,10 +169,15 @@ class Aspects:
             "workspace_area": [self.workspace_area.get(m) for m in self.working_modes],
         })
 
-    def plot(self, path: str | None = None, title: str | None = None) -> Any:
-        """One column per working mode: its aspects in the workspace and the joint space."""
+    def plot(self, path: str | None = None, title: str | None = None, *, fig: Any = None
+             ) -> Any:
+        """One column per working mode: its aspects in the workspace and the joint space.
+
+        Returns the matplotlib Figure; ``fig`` draws into an empty Figure of yours (a
+        notebook's), ``path`` writes it (PNG, SVG, PDF, ... by the suffix; masks rasterized).
+        """
         _check_path(path)
-        return _plot_aspects(self, path, title)
+        return _plot_aspects(self, path, title, fig)
 
 
 @dataclass
@@ -218,10 +223,15 @@ class Workspace:
                          "n_regions": [len(self.regions[m]) for m in self.working_modes],
                          "time": self.time})
 
-    def plot(self, path: str | None = None, title: str | None = None) -> Any:
-        """The reachable regions of each working mode and their union."""
+    def plot(self, path: str | None = None, title: str | None = None, *, fig: Any = None
+             ) -> Any:
+        """The reachable regions of each working mode and their union.
+
+        Returns the matplotlib Figure; ``fig`` draws into an empty Figure of yours,
+        ``path`` writes it.
+        """
         _check_path(path)
-        return _plot_workspace(self, path, title)
+        return _plot_workspace(self, path, title, fig)
 
 
 # ---------------------------------------------------------------------------------------
@@ -755,7 +765,14 @@ def _failed_status(curves: SingularCurves) -> str:
 # ---------------------------------------------------------------------------------------
 
 
-def _fig(nr, nc, w=4.0, h=4.0, path=None):
+def _fig(nr, nc, w=4.0, h=4.0, path=None, fig=None):
+    """A grid of nr x nc Axes: in ``fig`` when given (it must be empty), else in a new
+    Figure of (w nc, h nr) inches with constrained layout."""
+    if fig is not None:
+        if not hasattr(fig, "subplots") or fig.axes:
+            raise MechanismError("fig: expected an empty matplotlib Figure (e.g. "
+                                 "plt.figure(layout='constrained')) to draw the panels into")
+        return fig, fig.subplots(nr, nc, squeeze=False)
     from ..plot import _figure
 
     fig = _figure(path, (w * nc, h * nr), "constrained")
@@ -819,10 +836,11 @@ _COLORS = {"parallel": "tab:red", "serial": "tab:blue", "limit": "tab:green",
 
 
 def _plot_curves(res: SingularCurves, path=None, ax=None, title=None):
-    fig = None
     if ax is None:
         fig, axs = _fig(1, 1, 6, 6, path)
         ax = axs[0, 0]
+    else:
+        fig = ax.figure
     for c in res.curves:
         col = _COLORS.get(c.kind.split(":")[0], "k")
         for P in _split_wrapped(np.vstack([c.points, c.points[:1]]) if c.closed else c.points,
@@ -843,21 +861,21 @@ def _plot_curves(res: SingularCurves, path=None, ax=None, title=None):
     kinds = sorted({c.kind.split(":")[0] for c in res.curves})
     for k in kinds:
         ax.plot([], [], color=_COLORS.get(k, "k"), label=k)
-    ax.legend(loc="best", fontsize=7)
-    ax.set_title(title or f"{res.mechanism}: singular curves ({', '.join(kinds)})", fontsize=9)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title or f"{res.mechanism}: singular curves ({', '.join(kinds)})", fontsize=10)
     ax.set_xlim(*res.bounds[0])
     ax.set_ylim(*res.bounds[1])
     if not any(res.periodic):
         ax.set_aspect("equal")
-    return _save(fig, path) if fig is not None else ax
+    return _save(fig, path)
 
 
-def _plot_aspects(res: Aspects, path=None, title=None):
+def _plot_aspects(res: Aspects, path=None, title=None, fig=None):
     import matplotlib.pyplot as plt
 
     modes = res.working_modes
     rows = 2 if res.qa_grid is not None else 1
-    fig, axs = _fig(rows, len(modes), 3.6, 3.6, path)
+    fig, axs = _fig(rows, len(modes), 3.6, 4.2 if rows == 1 else 4.0, path, fig)
     cmap = plt.get_cmap("tab10")
     for j, mode in enumerate(modes):
         ax = axs[0, j]
@@ -875,13 +893,14 @@ def _plot_aspects(res: Aspects, path=None, title=None):
                 ax.plot(P[:, 0], P[:, 1], color="tab:red", lw=0.8,
                         label="parallel singularity" if first and sel.any() else None)
                 first = first and not sel.any()
-        if res.of_mode(mode):
-            ax.legend(fontsize=6, loc="best", framealpha=0.8)
+        if res.of_mode(mode):  # below the panel: it would hide part of a region
+            ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16),
+                      frameon=False)
         ax.set_xlim(*res.curves.bounds[0])
         ax.set_ylim(*res.curves.bounds[1])
         ax.set_aspect("equal")
         ax.set_title(f"working mode {_mode_str(mode)}: {len(res.of_mode(mode))} aspect(s)",
-                     fontsize=8)
+                     fontsize=10)
         ax.set_xlabel(res.plane[0])
         ax.set_ylabel(res.plane[1])
         if rows == 2:
@@ -893,24 +912,24 @@ def _plot_aspects(res: Aspects, path=None, title=None):
                                shading="nearest", rasterized=True)
             ax2.set_xlabel(_joint_label(res.qa_names[0]))
             ax2.set_ylabel(_joint_label(res.qa_names[1]))
-            ax2.set_title("serial aspects QA (joint space)", fontsize=8)
-    fig.suptitle(title or f"{res.mechanism}: generalized aspects per working mode", fontsize=10)
+            ax2.set_title("serial aspects QA (joint space)", fontsize=10)
+    fig.suptitle(title or f"{res.mechanism}: generalized aspects per working mode", fontsize=12)
     return _save(fig, path)
 
 
-def _plot_workspace(res: Workspace, path=None, title=None):
+def _plot_workspace(res: Workspace, path=None, title=None, fig=None):
     import matplotlib.pyplot as plt
 
     modes = res.working_modes
     rows = 2 if res.qa_masks is not None else 1
-    fig, axs = _fig(rows, len(modes) + 1, 3.6, 3.6, path)
+    fig, axs = _fig(rows, len(modes) + 1, 3.6, 3.6, path, fig)
     cmap = plt.get_cmap("tab10")
     for j, mode in enumerate(modes):
         ax = axs[0, j]
         for f in res.regions[mode]:
             ax.add_patch(_face_patch(f, facecolor=cmap(j % 10), alpha=0.5, edgecolor="k", lw=0.6))
         ax.set_title(f"working mode {_mode_str(mode)}: area {res.areas[mode]:.4g}",
-                     fontsize=8)
+                     fontsize=10)
         if rows == 2:
             ax2 = axs[1, j]
             g0, g1 = res.qa_grid
@@ -919,18 +938,18 @@ def _plot_workspace(res: Workspace, path=None, title=None):
                            rasterized=True)
             ax2.set_xlabel(_joint_label(res.qa_names[0]))
             ax2.set_ylabel(_joint_label(res.qa_names[1]))
-            ax2.set_title(f"working mode {_mode_str(mode)} in the joint space", fontsize=8)
+            ax2.set_title(f"working mode {_mode_str(mode)} in the joint space", fontsize=10)
     if rows == 2:
         axs[1, -1].axis("off")
     ax = axs[0, -1]
     for f in res.total:
         ax.add_patch(_face_patch(f, facecolor="0.6", alpha=0.6, edgecolor="k", lw=0.6))
-    ax.set_title(f"workspace: area {res.area:.4g}", fontsize=8)
+    ax.set_title(f"workspace: area {res.area:.4g}", fontsize=10)
     for ax in axs[0]:
         ax.set_xlim(*res.curves.bounds[0])
         ax.set_ylim(*res.curves.bounds[1])
         ax.set_aspect("equal")
         ax.set_xlabel(res.plane[0])
         ax.set_ylabel(res.plane[1])
-    fig.suptitle(title or f"{res.mechanism}: workspace per working mode", fontsize=10)
+    fig.suptitle(title or f"{res.mechanism}: workspace per working mode", fontsize=12)
     return _save(fig, path)

@@ -136,12 +136,19 @@ class Aspects3D:
                          "cuspidal": self.cuspidal,
                          "aspects": [a.to_dict() for a in self.aspects], "time": self.time})
 
-    def plot(self, path: str | None = None, every: int = 3, title: str | None = None) -> Any:
-        """The aspects as stacks of section outlines in (x, y, phi), one colour each."""
+    def plot(self, path: str | None = None, every: int = 3, title: str | None = None, *,
+             ax: Any = None) -> Any:
+        """The aspects as stacks of section outlines in (x, y, phi), one colour each.
+
+        Returns the matplotlib Figure; ``ax`` (a 3-D Axes) draws into yours, ``path``
+        writes the picture.
+        """
         from .aspects import _axes, _check_path, _save
 
         _check_path(path)
-        fig, ax, _ = _axes(None, (7.5, 6.5), three_d=True, path=path)
+        if ax is not None and getattr(ax, "name", "") != "3d":
+            raise MechanismError("ax: expected a 3-D Axes (fig.add_subplot(projection='3d'))")
+        fig, ax, _ = _axes(ax, (7.5, 6.5), three_d=True, path=path)
         for k, a in enumerate(self.aspects):
             color = f"C{k % 10}"
             label = (f"aspect {k + 1}: det {'+' if a.det_sign > 0 else '-'}, "

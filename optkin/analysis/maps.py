@@ -55,7 +55,9 @@ class SingularityMap:
     values : dict
         Measure name -> array (len(v), len(u)); NaN where no configuration exists.
     path : str or None
-        The PNG written by :func:`plot_singularity_map`.
+        The file :meth:`plot` or :func:`plot_singularity_map` last wrote.
+    figure : matplotlib Figure or None
+        The picture :func:`plot_singularity_map` drew (not part of :meth:`to_dict`).
     success, status, message :
         As every result (:mod:`optkin.results`): ``"optimal"`` when every grid point was
         sampled (unreachable points are part of the answer: NaN), ``"time_limit"`` when
@@ -72,6 +74,7 @@ class SingularityMap:
     success: bool = True
     status: str = OPTIMAL
     message: str = ""
+    figure: Any = field(default=None, repr=False, compare=False)
 
     def __repr__(self) -> str:
         reach = int(np.isfinite(self.values["distance"]).sum()) if "distance" in self.values else 0
@@ -91,6 +94,45 @@ class SingularityMap:
                          "axes": list(self.axes), "u": self.u, "v": self.v,
                          "fixed": self.fixed, "values": self.values, "path": self.path,
                          "reachable": int(np.sum(self.reachable))})
+
+    def plot(self, measure: str = "distance", log: bool = True, *, ax: Any = None,
+             path: Any = None, title: str | None = None) -> Any:
+        """Draw ``measure`` over the grid; returns the matplotlib Figure.
+
+        Singular curves appear as dark valleys (log10 of the measure); unreachable points
+        are left blank. ``ax`` draws into your Axes (a colour bar is added beside it),
+        ``path`` writes the picture (PNG, SVG, PDF, ... by the suffix, at
+        :data:`optkin.plot.DPI`).
+        """
+        if not isinstance(measure, str) or measure not in MEASURES:
+            raise MechanismError(f"measure: {show(measure)} is not one of {list(MEASURES)}")
+        if measure not in self.values:
+            raise MechanismError(f"measure: {measure!r} was not sampled in this map; "
+                                 f"sampled: {sorted(self.values)}")
+        if not isinstance(log, (bool, np.bool_)):
+            raise MechanismError(f"log: expected True or False, got {show(log)}")
+        if path is not None and not (isinstance(path, (str, os.PathLike)) and os.fspath(path)
+                                     or hasattr(path, "write")):
+            raise MechanismError(f"path: expected a file name (str or os.PathLike) or a "
+                                 f"file object, got {type(path).__name__}")
+        from ..plot import DPI, _figure
+
+        if ax is None:
+            fig = _figure(path, (6, 5), "constrained")  # out of pyplot when written
+            ax = fig.add_subplot()
+        else:
+            fig = ax.figure
+        _draw_map(fig, ax, self, self.values[measure], measure, bool(log), self.mech_name,
+                  title)
+        if path is not None:
+            try:
+                fig.savefig(path, dpi=DPI)
+            except OSError as e:
+                raise MechanismError(f"path: cannot write the picture {os.fspath(path)!r}: "
+                                     f"{e.strerror or e}") from None
+            if isinstance(path, (str, os.PathLike)):
+                self.path = os.fspath(path)
+        return fig
 
 
 def _measures(jac: Any) -> dict[str, float]:
@@ -251,12 +293,14 @@ def plot_singularity_map(
     mech: Mechanism,
     u: Sequence[float],
     v: Sequence[float],
-    path: str,
+    path: Any = None,
     measure: str = "distance",
     log: bool = True,
+    *,
+    ax: Any = None,
     **kwargs: Any,
 ) -> SingularityMap:
-    """Sample :func:`singularity_map` and draw ``measure`` as a PNG at ``path``.
+    """Sample :func:`singularity_map` and draw ``measure`` (:meth:`SingularityMap.plot`).
 
     Singular curves appear as dark valleys (log10 of the measure); unreachable points are
     left blank. Extra keyword arguments go to :func:`singularity_map`.
@@ -266,19 +310,23 @@ def plot_singularity_map(
     mech : Mechanism
     u, v : sequence of float
         Grid values of the two sampled coordinates (at least two finite values each).
-    path : str
-        The PNG to write.
+    path : str, os.PathLike or file object, optional
+        Write the picture there (PNG, SVG, PDF, ... by the suffix); the Figure then stays
+        out of pyplot.
     measure : str
         One of ``"distance"``, ``"parallel"``, ``"serial"``, ``"manipulability"``.
     log : bool
         Draw log10 of the measure.
+    ax : matplotlib Axes, optional
+        Draw into this Axes.
     **kwargs
         ``axes``, ``fixed``, ``working_mode``, ``guess`` of :func:`singularity_map`.
 
     Returns
     -------
     SingularityMap
-        The sampled measures, with ``path`` set.
+        The sampled measures, with the picture in ``figure`` (and ``path`` set when
+        written).
 
     Examples
     --------
@@ -294,49 +342,36 @@ def plot_singularity_map(
         raise MechanismError(f"measure: {show(measure)} is not one of {list(MEASURES)}")
     if not isinstance(log, (bool, np.bool_)):
         raise MechanismError(f"log: expected True or False, got {show(log)}")
-    if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
-        raise MechanismError(f"path: expected a file name (str or os.PathLike) for the PNG, "
-                             f"got {type(path).__name__}")
+    if path is not None and not (isinstance(path, (str, os.PathLike)) and os.fspath(path)
+                                 or hasattr(path, "write")):
+        raise MechanismError(f"path: expected a file name (str or os.PathLike) or a file "
+                             f"object for the picture, got {type(path).__name__}")
     unknown = sorted(set(kwargs) - set(_KWARGS))
     if unknown:
         raise MechanismError(f"plot_singularity_map: unknown argument(s) {unknown}; known: "
                              f"{list(_KWARGS)} (of singularity_map)")
-    from ..plot import DPI, _figure
-
     sm = singularity_map(mech, u, v, **kwargs)
-    Z = sm.values[measure]
-    fig = _figure(path, (6, 5))  # out of pyplot: nothing to close, no backend switched
-    axp = fig.add_subplot()
-    try:
-        _draw_map(fig, axp, sm, Z, measure, log, mech.name)
-        fig.savefig(path, dpi=DPI)
-    except OSError as e:
-        raise MechanismError(f"path: cannot write the PNG {os.fspath(path)!r}: "
-                             f"{e.strerror or e}") from None
-    sm.path = str(path)
+    sm.figure = sm.plot(measure, log, ax=ax, path=path, title=None)
     return sm
 
 
 def _draw_map(fig: Any, axp: Any, sm: SingularityMap, Z: np.ndarray, measure: str,
-              log: bool, name: str) -> None:
+              log: bool, name: str, title: str | None = None) -> None:
     with np.errstate(divide="ignore", invalid="ignore"):
         data = np.log10(np.maximum(Z, 1e-16)) if log else Z
+    finite = data[np.isfinite(data)]
+    # the colour scale from the 1st percentile up: one grid point that happens to fall on
+    # a singularity (log10 of 1e-16) would otherwise wash every valley out
+    lo = float(np.percentile(finite, 1)) if finite.size else None
     mesh = axp.pcolormesh(sm.u, sm.v, np.ma.masked_invalid(data), shading="auto",
-                          cmap="viridis")
-    cb = fig.colorbar(mesh, ax=axp)
+                          cmap="viridis", vmin=lo, rasterized=True)  # (small vector files)
+    extend = "min" if finite.size and finite.min() < lo else "neither"
+    cb = fig.colorbar(mesh, ax=axp, extend=extend)
     cb.set_label(("log10 " if log else "") + measure)
-    if np.isfinite(data).sum() > 4:
-        try:
-            lev = np.nanpercentile(data, 5)
-            axp.contour(sm.u, sm.v, np.ma.masked_invalid(data), levels=[lev], colors="w",
-                        linewidths=0.8)
-        except (ValueError, TypeError):
-            pass
     axp.set_xlabel(sm.axes[0])
     axp.set_ylabel(sm.axes[1])
     fx = ", ".join(f"{k}={v:.3g}" for k, v in sm.fixed.items())
-    axp.set_title(f"{name}: {measure}" + (f" ({fx})" if fx else ""))
-    fig.tight_layout()
+    axp.set_title(title or f"{name}: {measure}" + (f" ({fx})" if fx else ""))
 
 
 def _axis_values(name: str, a: Any) -> np.ndarray:

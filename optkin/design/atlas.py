@@ -72,11 +72,15 @@ class Atlas:
         return out
 
     def plot(self, path: str | None = None, measures: Sequence[str] | None = None,
-             levels: int = 12) -> Any:
-        """Contour maps of the measures over the design grid, labelled, one panel each."""
-        import matplotlib.pyplot as plt
+             levels: int = 12, *, fig: Any = None) -> Any:
+        """Contour maps of the measures over the design grid, labelled, one panel each.
 
-        from ..analysis.aspects import _save
+        Returns the matplotlib Figure; ``fig`` draws into an empty Figure of yours,
+        ``path`` writes it (at :data:`optkin.plot.DPI`).
+        """
+        from ..analysis.aspects import _check_path, _fig, _save
+
+        _check_path(path)
 
         names = list(measures or self.values)
         for m in names:
@@ -84,7 +88,7 @@ class Atlas:
                 raise MechanismError(f"plot: {show(m)} is not a measure of this atlas; known: "
                                      f"{', '.join(self.values)}")
         n = len(names)
-        fig, axs = plt.subplots(1, n, figsize=(4.6 * n, 4.0), dpi=150, squeeze=False)
+        fig, axs = _fig(1, n, 4.8, 4.2, path, fig)
         X, Y = np.meshgrid(*self.axes)
         for ax, m in zip(axs[0], names):
             V = self.values[m]
@@ -101,10 +105,7 @@ class Atlas:
             ax.set_ylabel(self.names[1])
             ax.set_title(textwrap.fill(m, 44), fontsize=10)
             ax.set_aspect("equal", adjustable="box")
-        fig.tight_layout()
-        if path is not None:
-            _save(fig, path)
-        return fig
+        return _save(fig, path)
 
 
 def atlas(family: Callable[..., Any] | Family, variables: Mapping[str, Any] | None = None,
