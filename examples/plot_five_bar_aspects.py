@@ -73,14 +73,8 @@ for w in asp.working_modes:
 
 # %%
 # ``asp.plot()`` draws one column per working mode: the aspects in the workspace (top,
-# with the parallel singular curves that bound them) and in the joint space (bottom). It
-# uses small legends inside the panels; below, they are moved under each panel.
-fig = asp.plot()
-fig.set_size_inches(13, 8.2)  # the figure has a constrained layout: no tight_layout
-fig.suptitle("five-bar (9, 8, 5, 5, 8): generalized aspects of each working mode", fontsize=12)
-for ax in fig.axes:
-    ax.title.set_fontsize(10)
-    if ax.get_legend() is not None:
-        ax.get_legend().remove()
-        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.13), frameon=False)
+# with the parallel singular curves that bound them, each aspect's area in the legend) and
+# in the joint space (bottom). It returns the Figure; ``asp.plot(fig=...)`` draws into
+# one of yours, ``asp.plot("aspects.svg")`` writes it.
+fig = asp.plot(title="five-bar (9, 8, 5, 5, 8): generalized aspects of each working mode")
 # sphinx_gallery_thumbnail_number = 3
