@@ -11,6 +11,7 @@ problem-file reference is generated from :func:`optkin.problems.schema.problem_j
 from __future__ import annotations
 
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -94,5 +95,18 @@ html_static_path: list[str] = []
 html_show_sourcelink = False
 
 
+_FIELD = re.compile(r"^(\s*:(?:ivar|vartype|cvar|var) )([^:]+)(:.*)$")
+
+
+def _join_attribute_names(app, what, name, obj, options, lines):
+    """After napoleon: ``:ivar qa, qp, qc:`` would read as a variable ``qc`` of type
+    ``qa, qp,`` (the field's ``type name`` form); written ``qa,qp,qc`` it is one name."""
+    for i, line in enumerate(lines):
+        m = _FIELD.match(line)
+        if m and ", " in m.group(2):
+            lines[i] = m.group(1) + m.group(2).replace(", ", ",") + m.group(3)
+
+
 def setup(app):  # noqa: D103
     write_schema_page(HERE / "problem_schema.md")
+    app.connect("autodoc-process-docstring", _join_attribute_names, priority=600)

@@ -82,7 +82,6 @@ for ax in [ax for ax in fig.axes if ax.get_xlabel() == "a"]:
             label=f"optimum ({a_opt:.3f}, {b_opt:.3f})")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, fontsize=8,
               frameon=False)
-fig.tight_layout()
 
 # %%
 # The optimal five-bar and its conditioning

@@ -22,7 +22,7 @@ def test_readme_tour_runs(tmp_path, monkeypatch):
 def test_readme_shows_the_two_commands():
     text = README.read_text()
     assert "python -m pip install -e . && optkin run problems/" in text
-    assert 'python -m pip install -e ".[test]" && python -m pytest' in text
+    assert 'python -m pip install -e ".[test]" && python -m pytest -n 2' in text
     ci = (README.parent / ".ci" / "run").read_text()
-    assert 'python -m pip install -e ".[test]" && python -m pytest' in ci
+    assert 'python -m pip install -e ".[test]" && python -m pytest -n 2' in ci
     assert "optkin run problems/" in ci
