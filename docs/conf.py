@@ -21,6 +21,7 @@ sys.path.insert(0, str(HERE.parent))
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
+from _options_page import write_options_page  # noqa: E402
 from _schema_page import write_schema_page  # noqa: E402
 
 import optkin  # noqa: E402
@@ -109,4 +110,5 @@ def _join_attribute_names(app, what, name, obj, options, lines):
 
 def setup(app):  # noqa: D103
     write_schema_page(HERE / "problem_schema.md")
+    write_options_page(HERE / "options.md")
     app.connect("autodoc-process-docstring", _join_attribute_names, priority=600)

@@ -45,5 +45,21 @@ def test_every_toctree_entry_exists():
                 target = page.parent / entry
                 found = [target.with_suffix(s) for s in (".md", ".rst")] + [
                     target / "index.md", target / "index.rst"]
-                generated = entry in ("gallery/index", "problem_schema")  # made by the build
+                generated = entry in ("gallery/index", "problem_schema", "options")  # made by the build
                 assert generated or any(f.exists() for f in found), f"{page.name}: {entry}"
+
+
+def test_the_options_page_lists_every_defaults_dict():
+    import sys
+
+    sys.path.insert(0, str(DOCS))
+    try:
+        from _options_page import TABLES, options_markdown
+    finally:
+        sys.path.remove(str(DOCS))
+    found = set()
+    for src in (DOCS.parent / "optkin").rglob("*.py"):
+        found |= set(re.findall(r"^([A-Z][A-Z_]*_DEFAULTS)\b.*=", src.read_text(), flags=re.M))
+    assert found == {name for _, name, _ in TABLES}
+    text = options_markdown()
+    assert "| `tol` | `1e-10` | max \\|Phi\\| for a converged start |" in text  # a comment kept
