@@ -282,13 +282,45 @@ def _as_list(v: Any, names: Sequence[str]) -> list[float]:
     return [float(x) for x in v]
 
 
+#: Set by the SIGINT handler :func:`main` installs: a Ctrl-C that a library turned into
+#: an exception of its own (pydantic-core wraps one raised while it builds a validator in
+#: a SchemaError) is still an interrupt, reported as such and without a traceback.
+_INTERRUPTED = False
+
+
+def _on_sigint(signum: int, frame: Any) -> None:
+    global _INTERRUPTED
+    _INTERRUPTED = True
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``optkin`` console script; returns the exit status."""
+    import signal
+    import threading
+
+    global _INTERRUPTED
+    _INTERRUPTED = False
+    if threading.current_thread() is not threading.main_thread():
+        return _main(argv)
+    previous = signal.signal(signal.SIGINT, _on_sigint)
+    try:
+        return _main(argv)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _main(argv: Sequence[str] | None) -> int:
     try:
         parser = build_parser()
     except KeyboardInterrupt:
         _err("optkin: interrupted")
         return 130
+    except Exception:
+        if _INTERRUPTED:
+            _err("optkin: interrupted")
+            return 130
+        raise
     args = parser.parse_args(list(argv) if argv is not None else None)
     try:
         if args.command == "run":
@@ -311,10 +343,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:
         return EXIT_FAILED
     except OSError as e:  # an output path that cannot be created or written
+        if _INTERRUPTED:
+            _err("optkin: interrupted; completed results are kept, rerun to resume")
+            return 130
         where = f": {e.filename}" if getattr(e, "filename", None) else ""
         _err(f"optkin: cannot write the output ({e.strerror or e}{where}); choose another "
              "path with --out")
         return EXIT_INVALID
+    except Exception:
+        if _INTERRUPTED:  # a Ctrl-C some library wrapped in its own exception
+            _err("optkin: interrupted; completed results are kept, rerun to resume")
+            return 130
+        raise
     parser.error(f"unknown command {args.command!r}")
     return EXIT_INVALID
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -521,7 +522,12 @@ def test_ctrl_c_at_any_moment_prints_no_traceback(tmp_path: Path) -> None:
         time.sleep(delay)
         p.send_signal(signal.SIGINT)
         out, err = p.communicate(timeout=60)
-        assert "Traceback" not in err, (delay, err)
+        # on a loaded machine the first delay may still fall in Python's own start-up
+        # (runpy, the standard library), before any optkin code: no frame of optkin's then
+        optkin_frames = re.findall(r'File "[^"]*[/\\]optkin[/\\][^"]*"', err)
+        if "Traceback" in err:
+            assert delay < 0.5 and not optkin_frames, (delay, err)
+            continue
         assert p.returncode in (0, 130, -signal.SIGINT), (delay, p.returncode, err)
 
 
