@@ -47,13 +47,10 @@ print("leg lengths:", np.round(legs, 4))
 modes = optkin.assembly_modes(hexapod, legs)
 print("homotopy:", modes.info.get("homotopy"))
 print(modes.summary(), f"p_new = {modes.info['p_new']:.4f}")
-above = [r for r in modes if r.pose[2, 3] > 0]
-fig = plt.figure(figsize=(10, 7.4))
-for i, r in enumerate(above):
-    ax = fig.add_subplot(2, 2, i + 1, projection="3d")
-    optkin.plot.draw(hexapod, r, ax=ax)
-    x, y, z = r.pose[:3, 3]
-    ax.set_title(f"mode {i + 1}: platform centre ({x:.2f}, {y:.2f}, {z:.2f})", fontsize=11)
+
+
+def frame(ax, elev, azim):
+    """The hexapod's box: 2.2 x 2.2 x 1 with sparse ticks, seen from (elev, azim)."""
     ax.set_xlim(-1.1, 1.1)
     ax.set_ylim(-1.1, 1.1)
     ax.set_zlim(0.0, 1.0)
@@ -61,7 +58,17 @@ for i, r in enumerate(above):
     ax.set_xticks([-1, 0, 1])
     ax.set_yticks([-1, 0, 1])
     ax.set_zticks([0, 0.5, 1])
-    ax.view_init(elev=20, azim=-60)
+    ax.view_init(elev=elev, azim=azim)
+
+
+above = [r for r in modes if r.pose[2, 3] > 0]
+fig = plt.figure(figsize=(10, 7.4))
+for i, r in enumerate(above):
+    ax = fig.add_subplot(2, 2, i + 1, projection="3d")
+    optkin.plot.draw(hexapod, r, ax=ax)
+    x, y, z = r.pose[:3, 3]
+    ax.set_title(f"mode {i + 1}: platform centre ({x:.2f}, {y:.2f}, {z:.2f})", fontsize=11)
+    frame(ax, elev=20, azim=-60)
 handles, labels = fig.axes[0].get_legend_handles_labels()
 fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False)
 fig.suptitle(f"Hexapod, legs ({', '.join(f'{v:.3f}' for v in legs)}): "
@@ -134,14 +141,7 @@ optkin.plot.draw(hexapod, path[0], ax=ax)
 ax.plot(tracked[:, 0], tracked[:, 1], tracked[:, 2], color="C3", lw=2.2,
         label="tracked platform centre")
 ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.02), ncol=3, fontsize=8, frameon=False)
-ax.set_xlim(-1.1, 1.1)
-ax.set_ylim(-1.1, 1.1)
-ax.set_zlim(0.0, 1.0)
-ax.set_box_aspect((2.2, 2.2, 1.0))
-ax.set_xticks([-1, 0, 1])
-ax.set_yticks([-1, 0, 1])
-ax.set_zticks([0, 0.5, 1])
-ax.view_init(elev=25, azim=-55)
+frame(ax, elev=25, azim=-55)
 ax.set_title("the hexapod at t = 0 and the tracked path", fontsize=11)
 axl = fig.add_subplot(2, 2, 2)
 for i in range(6):

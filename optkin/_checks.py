@@ -48,12 +48,17 @@ MAX_ABS = 1e150
 Path = Sequence[str | int]
 
 
-def _err(error: type[Exception], where: str, msg: str, path: Path = ()) -> Exception:
-    """``error("where: msg")``, with ``path`` attached when the class takes one (optkin's)."""
+def _exc(error: type[Exception], msg: str, path: Path = ()) -> Exception:
+    """``error(msg)``, with ``path`` attached when the class takes one (optkin's)."""
     try:
-        return error(f"{where}: {msg}", path=tuple(path))  # type: ignore[call-arg]
+        return error(msg, path=tuple(path))  # type: ignore[call-arg]
     except TypeError:
-        return error(f"{where}: {msg}")
+        return error(msg)
+
+
+def _err(error: type[Exception], where: str, msg: str, path: Path = ()) -> Exception:
+    """``error("where: msg")`` (:func:`_exc`)."""
+    return _exc(error, f"{where}: {msg}", path)
 
 
 def _digits(iv: int) -> str:
@@ -373,11 +378,7 @@ def check_number(v: Any, where: str, *, integer: bool = False, lo: float | None 
         msg = f"{where} must be {want} (default {default!r}), got {_show(v)}"
     if why:
         msg += f" ({why})"
-    try:
-        exc = error(msg, path=tuple(path))  # type: ignore[call-arg]
-    except TypeError:  # an error class without a path
-        exc = error(msg)
-    raise exc
+    raise _exc(error, msg, path)
 
 
 def check_option(opts: Any, name: str, where: str, defaults: Any, **bounds: Any) -> Any:

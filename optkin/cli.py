@@ -286,6 +286,7 @@ def _as_list(v: Any, names: Sequence[str]) -> list[float]:
 #: an exception of its own (pydantic-core wraps one raised while it builds a validator in
 #: a SchemaError) is still an interrupt, reported as such and without a traceback.
 _INTERRUPTED = False
+_INTERRUPTED_RUN = "optkin: interrupted; completed results are kept, rerun to resume"
 
 
 def _on_sigint(signum: int, frame: Any) -> None:
@@ -338,13 +339,13 @@ def _main(argv: Sequence[str] | None) -> int:
         _err(f"optkin: {e}")
         return EXIT_INVALID
     except KeyboardInterrupt:
-        _err("optkin: interrupted; completed results are kept, rerun to resume")
+        _err(_INTERRUPTED_RUN)
         return 130
     except BrokenPipeError:
         return EXIT_FAILED
     except OSError as e:  # an output path that cannot be created or written
         if _INTERRUPTED:
-            _err("optkin: interrupted; completed results are kept, rerun to resume")
+            _err(_INTERRUPTED_RUN)
             return 130
         where = f": {e.filename}" if getattr(e, "filename", None) else ""
         _err(f"optkin: cannot write the output ({e.strerror or e}{where}); choose another "
@@ -352,7 +353,7 @@ def _main(argv: Sequence[str] | None) -> int:
         return EXIT_INVALID
     except Exception:
         if _INTERRUPTED:  # a Ctrl-C some library wrapped in its own exception
-            _err("optkin: interrupted; completed results are kept, rerun to resume")
+            _err(_INTERRUPTED_RUN)
             return 130
         raise
     parser.error(f"unknown command {args.command!r}")

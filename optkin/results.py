@@ -166,7 +166,6 @@ def jsonable(v: Any, *, keep_nonfinite: bool = False) -> Any:
     return repr(v)
 
 
-_jsonable = jsonable  # the former private name (same function)
 
 
 def _short_array(a: np.ndarray) -> str:

@@ -104,17 +104,10 @@ class SingularityMap:
         ``path`` writes the picture (PNG, SVG, PDF, ... by the suffix, at
         :data:`optkin.plot.DPI`).
         """
-        if not isinstance(measure, str) or measure not in MEASURES:
-            raise MechanismError(f"measure: {show(measure)} is not one of {list(MEASURES)}")
+        _check_picture(measure, log, path)
         if measure not in self.values:
             raise MechanismError(f"measure: {measure!r} was not sampled in this map; "
                                  f"sampled: {sorted(self.values)}")
-        if not isinstance(log, (bool, np.bool_)):
-            raise MechanismError(f"log: expected True or False, got {show(log)}")
-        if path is not None and not (isinstance(path, (str, os.PathLike)) and os.fspath(path)
-                                     or hasattr(path, "write")):
-            raise MechanismError(f"path: expected a file name (str or os.PathLike) or a "
-                                 f"file object, got {type(path).__name__}")
         from ..plot import DPI, _figure
 
         if ax is None:
@@ -338,6 +331,19 @@ def plot_singularity_map(
     ...     os.path.getsize(sm.path) > 0
     True
     """
+    _check_picture(measure, log, path)  # before the sampling, which takes a while
+    unknown = sorted(set(kwargs) - set(_KWARGS))
+    if unknown:
+        raise MechanismError(f"plot_singularity_map: unknown argument(s) {unknown}; known: "
+                             f"{list(_KWARGS)} (of singularity_map)")
+    sm = singularity_map(mech, u, v, **kwargs)
+    sm.figure = sm.plot(measure, log, ax=ax, path=path, title=None)
+    return sm
+
+
+def _check_picture(measure: Any, log: Any, path: Any) -> None:
+    """The drawing arguments of :meth:`SingularityMap.plot` and
+    :func:`plot_singularity_map`, else a MechanismError naming the one that is wrong."""
     if not isinstance(measure, str) or measure not in MEASURES:
         raise MechanismError(f"measure: {show(measure)} is not one of {list(MEASURES)}")
     if not isinstance(log, (bool, np.bool_)):
@@ -346,13 +352,6 @@ def plot_singularity_map(
                                  or hasattr(path, "write")):
         raise MechanismError(f"path: expected a file name (str or os.PathLike) or a file "
                              f"object for the picture, got {type(path).__name__}")
-    unknown = sorted(set(kwargs) - set(_KWARGS))
-    if unknown:
-        raise MechanismError(f"plot_singularity_map: unknown argument(s) {unknown}; known: "
-                             f"{list(_KWARGS)} (of singularity_map)")
-    sm = singularity_map(mech, u, v, **kwargs)
-    sm.figure = sm.plot(measure, log, ax=ax, path=path, title=None)
-    return sm
 
 
 def _draw_map(fig: Any, axp: Any, sm: SingularityMap, Z: np.ndarray, measure: str,
