@@ -6,9 +6,6 @@ problem-file validator) runs exactly the checks a real call would make, and noth
 ``with computing():`` switches the checkpoints off again for a call whose *result* the
 validator needs (the configuration of a pose-based statics task, say).
 
-Also here: ``with strict_options():`` makes unknown options an error instead of a warning
-(problem files; :func:`optkin.solvers.common.merge_options` reads :func:`options_strict`).
-
 >>> with validating():
 ...     try:
 ...         checkpoint()
@@ -23,13 +20,10 @@ import contextlib
 import contextvars
 from collections.abc import Iterator
 
-__all__ = ["Checked", "checkpoint", "computing", "options_strict", "strict_options",
-           "validating"]
+__all__ = ["Checked", "checkpoint", "computing", "validating"]
 
 _VALIDATING: contextvars.ContextVar[bool] = contextvars.ContextVar("optkin_validating",
                                                                    default=False)
-_STRICT: contextvars.ContextVar[bool] = contextvars.ContextVar("optkin_strict_options",
-                                                               default=False)
 
 
 class Checked(Exception):  # noqa: N818 - a signal, not an error
@@ -59,13 +53,3 @@ def validating() -> contextlib.AbstractContextManager[None]:
 def computing() -> contextlib.AbstractContextManager[None]:
     """Within this block, public functions run in full even while validating."""
     return _set(_VALIDATING, False)
-
-
-def strict_options() -> contextlib.AbstractContextManager[None]:
-    """Within this block, unknown options are errors, not warnings."""
-    return _set(_STRICT, True)
-
-
-def options_strict() -> bool:
-    """Whether unknown options are errors here."""
-    return _STRICT.get()

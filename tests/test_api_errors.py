@@ -17,7 +17,6 @@ import pickle
 import subprocess
 import sys
 import textwrap
-import warnings
 
 import numpy as np
 import pytest
@@ -390,9 +389,8 @@ def test_docstring_examples_of_the_new_modules(name):
     assert tried > 0 and failures == 0
 
 
-def test_no_warning_becomes_an_exception_on_odd_input():
-    """Unknown options warn (Python API) and the call still runs."""
-    with warnings.catch_warnings(record=True):
-        warnings.simplefilter("always")
-        r = optkin.forward(M.four_bar(1, 2, 2, 2.5), [1.0], **{"10": 1})
-    assert r.success
+def test_an_odd_option_name_is_named_in_the_error():
+    """An option name Python accepts but no function has (``**{"10": 1}``) is optkin's
+    error naming it, never a crash while building the message."""
+    with pytest.raises(MechanismError, match=r"forward: unknown option '10'; known options"):
+        optkin.forward(M.four_bar(1, 2, 2, 2.5), [1.0], **{"10": 1})

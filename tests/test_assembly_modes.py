@@ -523,7 +523,7 @@ def test_option_errors():
     m = optkin.mechanisms.five_bar(2.0, 1.5, 2.0, 2.0, 1.5)
     with pytest.raises(ValueError, match="width must be a power of 2"):
         optkin.assembly_modes(m, [1.2, 1.9], width=30)
-    with pytest.warns(UserWarning, match="unknown option 'budget'"):
+    with pytest.raises(MechanismError, match="unknown option 'budget'"):
         optkin.assembly_modes(m, [1.2, 1.9], budget=10)
     with pytest.raises(MechanismError, match=r"qa_path: expected an array of shape \(N, 2\)"):
         optkin.track(m, np.zeros((5, 3)))

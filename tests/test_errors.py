@@ -151,9 +151,9 @@ def test_solver_input_errors():
         optkin.inverse(m, np.full((4, 4), 0.5))
 
 
-def test_unknown_option_warns():
+def test_unknown_option_raises():
     m = M.five_bar(1, 1, 1, 1, 1)
-    with pytest.warns(UserWarning, match=r"unknown option 'tolerance'"):
+    with pytest.raises(MechanismError, match=r"unknown option 'tolerance'"):
         optkin.forward(m, [1.8, 1.3], tolerance=1e-3)
 
 

@@ -8,8 +8,6 @@ Modern Robotics 7.3 (four-bar bifurcations, five-bar Figs. 7.7-7.9), MR 7.1 / Ch
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
 
@@ -320,10 +318,13 @@ def test_singularity_map_png_matches_leg_line_geometry(tmp_path):
 def test_classify_options_and_report():
     m = M.five_bar(1, 1, 1, 1, 1)
     s = optkin.inverse(m, [0.5, 1.0])[0]
-    with warnings.catch_warnings(record=True) as w:
-        warnings.simplefilter("always")
-        rep = optkin.classify(m, s, tolerance=1e-3)
-    assert any("unknown option 'tolerance'" in str(x.message) for x in w)
+    with pytest.raises(optkin.MechanismError, match=r"classify: unknown option 'tolerance'; "
+                       r"known options: \['rtol', 'second_order_tol'\]"):
+        optkin.classify(m, s, tolerance=1e-3)
+    with pytest.raises(optkin.MechanismError, match=r"unknown option 'rtl' \(did you mean "
+                       r"'rtol'\?\)"):
+        optkin.classify(m, s, rtl=1e-3)
+    rep = optkin.classify(m, s)
     d = rep.to_dict()
     assert d["types"] == [] and set(d["margins"]) >= {"serial", "parallel", "end_effector"}
     assert not rep.singular and repr(rep) == "SingularityReport(regular)"

@@ -387,7 +387,7 @@ def test_inverse_of_a_khalil_mechanism_needs_at_least_one_start():
 
 
 def test_assembly_modes_seed_and_width_are_checked(rpr3, closed):
-    with pytest.raises(MechanismError, match=r"assembly_modes: seed must be an integer >= 0"):
+    with pytest.raises(MechanismError, match=r"assembly_modes: option seed must be a number >= 0"):
         optkin.assembly_modes(rpr3, closed.qa, seed=-1)
     with pytest.raises(MechanismError, match=r"assembly_modes: option width must be a power of 2"):
         optkin.assembly_modes(rpr3, closed.qa, width=3)

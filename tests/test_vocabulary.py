@@ -275,32 +275,33 @@ def test_failures_are_results_in_the_vocabulary(walk):
 def test_seed_is_accepted_by_keyword_everywhere():
     """``seed`` is a keyword argument or an option (``*_DEFAULTS``) of every public function
     that has one, and the two kinds agree on the keyword."""
+    from optkin.solvers.enumerate import ASSEMBLY_DEFAULTS
     from optkin.solvers.inverse import INVERSE_DEFAULTS
 
     with_seed = [k for k, f in FUNCTIONS.items() if "seed" in inspect.signature(f).parameters]
-    assert {"optkin.assembly_modes", "optkin.dof", "optkin.design.optimize"} <= set(with_seed)
+    assert {"optkin.dof", "optkin.design.optimize"} <= set(with_seed)
     for k in with_seed:
         p = inspect.signature(FUNCTIONS[k]).parameters["seed"]
         assert p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY), k
-    assert "seed" in INVERSE_DEFAULTS
+    assert "seed" in INVERSE_DEFAULTS and "seed" in ASSEMBLY_DEFAULTS
     m = M.five_bar(2.0, 1.5, 2.0, 2.0, 1.5)
     a = optkin.assembly_modes(m, [1.2, 1.9], seed=3, method="multistart")
-    b = optkin.assembly_modes(m, [1.2, 1.9], 3, method="multistart")  # positional still works
-    assert a.seed == b.seed == 3 and len(a) == len(b)
+    b = optkin.assembly_modes(m, [1.2, 1.9], seed=4, method="multistart")
+    assert (a.seed, b.seed) == (3, 4) and len(a) == len(b)
+    with pytest.raises(TypeError):
+        optkin.assembly_modes(m, [1.2, 1.9], 3)  # an option, never positional
     assert optkin.inverse(M.sr400(), np.eye(4) + np.c_[np.zeros((4, 3)), [0.5, 0, 0.5, 0]],
                           seed=3, starts=8).seed == 3
 
 
 def test_unknown_options_name_the_allowed_ones():
     m = M.four_bar(1.0, 2.0, 2.0, 2.5)
-    with pytest.warns(UserWarning, match=r"forward: unknown option 'tolerance' ignored; known "
-                                         r"options: \['max_iter', 'method', 'polish', 'tol'\]"):
+    with pytest.raises(optkin.MechanismError,
+                       match=r"^forward: unknown option 'tolerance' \(did you mean 'tol'\?\); "
+                             r"known options: \['max_iter', 'method', 'polish', 'tol'\]"):
         optkin.forward(m, [1.0], tolerance=1e-9)
-    from optkin._dryrun import strict_options
-
-    with strict_options(), pytest.raises(optkin.MechanismError,
-                                         match=r"^inverse: unknown option 'tolerance'; known"):
-        optkin.inverse(m, [1.0, 1.0, 0.0], tolerance=1e-9)
+    with pytest.raises(optkin.MechanismError, match=r"^inverse: unknown option 'budget'; known"):
+        optkin.inverse(m, [1.0, 1.0, 0.0], budget=9)
 
 
 def test_numbers_and_mechanisms_are_checked_in_one_place():

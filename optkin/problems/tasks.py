@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from optkin._dryrun import Checked, computing, strict_options, validating
+from optkin._dryrun import Checked, computing, validating
 from optkin.errors import MechanismError
 from optkin.problems.schema import TaskBase
 from optkin.results import jsonable
@@ -62,8 +62,9 @@ TASKS: dict[str, TaskFunction] = {}
 @dataclasses.dataclass(frozen=True)
 class OptionSpec:
     """Which ``options`` a task kind accepts: the keys of a library ``*_DEFAULTS`` mapping
-    (``defaults``, dotted under ``optkin``), or the keyword parameters of the library
-    function ``function`` minus those the task sets itself (``explicit``)."""
+    (``defaults``, dotted under ``optkin``) or else the keyword parameters of the library
+    function ``function``, minus those the task sets itself from its own fields
+    (``explicit``)."""
 
     function: str
     defaults: str | None = None
@@ -72,7 +73,8 @@ class OptionSpec:
     def allowed(self) -> list[str]:
         if self.defaults is not None:
             module, _, name = self.defaults.rpartition(".")
-            return sorted(getattr(importlib.import_module(f"optkin.{module}"), name))
+            keys = getattr(importlib.import_module(f"optkin.{module}"), name)
+            return sorted(k for k in keys if k not in self.explicit)
         import inspect
 
         fn = library_function(self.function, self.function)
@@ -317,7 +319,8 @@ def _kw(task: Any, *keys: str) -> dict[str, Any]:
     return {k: getattr(task, k) for k in keys if getattr(task, k, None) is not None}
 
 
-@register("assembly_modes", OptionSpec("assembly_modes", "solvers.enumerate.ASSEMBLY_DEFAULTS"))
+@register("assembly_modes", OptionSpec("assembly_modes", "solvers.enumerate.ASSEMBLY_DEFAULTS",
+                                       ("seed",)))
 def assembly_modes_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.assembly_modes(mech, qa, seed=seed, **options)``."""
     fn = library_function("assembly_modes", "assembly_modes")
@@ -535,17 +538,13 @@ def design_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
 
 
 def run_task(mech: Any, task: TaskBase, ctx: TaskContext) -> dict[str, Any]:
-    """Run one task through the registry (exceptions propagate to the runner).
-
-    Unknown options are errors here (as everywhere in problem files).
-    """
+    """Run one task through the registry (exceptions propagate to the runner)."""
     kind = getattr(task, "kind", None)
     fn = TASKS.get(str(kind))
     if fn is None:
         raise NotImplementedError(f"task kind {kind!r} has no runner in this version of optkin")
     check_options(task)
-    with strict_options():
-        out = fn(mech, task, ctx)
+    out = fn(mech, task, ctx)
     if not isinstance(out, dict):
         out = {"value": jsonable(out)}
     return out

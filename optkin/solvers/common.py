@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+import difflib
 import math
 import time
-import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -12,7 +12,6 @@ import numpy as np
 
 from .._checks import MAX_ABS, as_matrix, as_vector, check_mechanism, check_option
 from .._checks import show as _show
-from .._dryrun import options_strict
 from ..errors import MechanismError, NumericError
 from ..model import Model
 from ..numeric import singular_values
@@ -23,8 +22,11 @@ __all__ = ["merge_options", "count_option", "check_qa", "check_mechanism", "chec
 
 
 def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: str) -> dict[str, Any]:
-    """Merge keyword options over defaults; unknown names warn and are ignored (inside
-    :func:`optkin._dryrun.strict_options`, as for problem files, they are errors).
+    """Merge keyword options over defaults.
+
+    An unknown name is an error (a :class:`MechanismError` naming it, the closest known
+    name when one is close, and every known option), in Python as in problem files: a
+    misspelt tolerance must not silently leave the default in force.
 
     An option whose default is a number (tolerances, counts, limits, seeds) must be given
     a real number >= 0 of magnitude at most ``MAX_ABS`` (inf allowed, e.g. to disable a
@@ -37,16 +39,12 @@ def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: 
     """
     out = dict(defaults)
     for k, v in given.items():
-        if k not in defaults and options_strict():  # problem files: unknown is an error
-            raise MechanismError(
-                f"{where}: unknown option {_show(k)}; known options: {sorted(defaults)}",
-                path=("options", str(k)))
         if k not in defaults:
-            warnings.warn(
-                f"{where}: unknown option {_show(k)} ignored; known options: {sorted(defaults)}",
-                stacklevel=3,
-            )
-            continue
+            close = suggest(str(k), [str(d) for d in defaults])
+            hint = f" (did you mean {close!r}?)" if close else ""
+            raise MechanismError(
+                f"{where}: unknown option {_show(k)}{hint}; known options: {sorted(defaults)}",
+                path=("options", str(k)))
         d = defaults[k]
         if isinstance(d, (int, float)) and not isinstance(d, bool):
             f = check_option({k: v}, k, where, defaults, lo=0.0, finite=False)
@@ -54,6 +52,15 @@ def merge_options(defaults: Mapping[str, Any], given: Mapping[str, Any], where: 
         out[k] = v
     return out
 
+
+def suggest(name: str, known: list[str]) -> str | None:
+    """The known name ``name`` most likely misspells: one it starts with or that starts with
+    it (``tolerance`` -> ``tol``), else the closest by difflib, else None."""
+    pre = [k for k in known if k and (name.startswith(k) or k.startswith(name))]
+    if pre:
+        return max(pre, key=len)
+    close = difflib.get_close_matches(name, known, n=1)
+    return close[0] if close else None
 
 
 def count_option(opts: Mapping[str, Any], name: str, where: str, lo: int, hi: int,

@@ -137,6 +137,7 @@ __all__ = [
 
 #: Options of :func:`assembly_modes` and their defaults.
 ASSEMBLY_DEFAULTS: dict[str, Any] = {
+    "seed": 0,  # of the Sobol scrambling and the homotopy's gamma (a run is reproducible)
     "tol": 1e-10,  # max |Phi| for a converged start
     "starts": 20000,  # start budget
     "min_starts": "auto",  # starts before the target may stop a run: auto 256, 2048 (6+ unknowns)
@@ -833,7 +834,7 @@ def _good_turing(hits: Sequence[int], draws: int) -> dict[str, Any]:
     }
 
 
-def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> SolutionSet:
+def assembly_modes(mech: Mechanism, qa: Any, **options: Any) -> SolutionSet:
     """Every real assembly mode: all distinct solutions x of Phi(q_a, x) = 0.
 
     Low-discrepancy starts are solved together by Khalil's clamped Newton iteration ([7.55])
@@ -849,10 +850,9 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
         joints are the unknowns).
     qa : array (n_actuated,)
         Active joint values.
-    seed : int
-        Scrambling seed of the Sobol sequence (a run is reproducible from it).
     **options
-        See :data:`ASSEMBLY_DEFAULTS`: ``starts`` (budget), ``target`` and
+        See :data:`ASSEMBLY_DEFAULTS`: ``seed`` (of the Sobol scrambling and the
+        homotopy's random gamma: a run is reproducible from it), ``starts`` (budget), ``target`` and
         ``target_upper`` (stop when the Good-Turing estimate ``p_new`` of the probability
         of a new solution is at most ``target`` and its upper bound ``p_new_upper`` at most
         ``target_upper``), ``time_limit`` (s), ``bound`` (known maximum count, ``"auto"``
@@ -907,8 +907,8 @@ def assembly_modes(mech: Mechanism, qa: Any, seed: int = 0, **options: Any) -> S
     """
     opts = merge_options(ASSEMBLY_DEFAULTS, options, "assembly_modes")
     check_mechanism(mech, "assembly_modes")
-    seed = check_number(seed, "assembly_modes: seed", integer=True, lo=0, hi=2**63 - 1,
-                        default=0, path=("seed",))
+    seed = check_number(opts["seed"], "assembly_modes: seed", integer=True, lo=0,
+                        hi=2**63 - 1, default=0, path=("options", "seed"))
     model = get_model(mech)
     _check_size_of(model, "assembly_modes")
     qa = _qa_arg(model, qa)
