@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 __all__ = [
-    "KinResult", "SolutionSet", "SolverStats", "EnumerationStats", "STATUS",
+    "KinResult", "SolutionSet", "SolverStats", "EnumerationStats", "TrackStats", "STATUS",
     "OPTIMAL", "INACCURATE", "INFEASIBLE", "UNBOUNDED", "SINGULAR", "ITERATION_LIMIT",
     "TIME_LIMIT", "MEMORY_LIMIT", "ERROR", "SOLUTION_PRESENT", "INF_OR_UNB", "LIMIT_REACHED",
     "FAILURE", "ANSWERED", "RESULT_ATTRIBUTES", "ipopt_status", "jsonable",
@@ -259,6 +259,51 @@ class EnumerationStats:
                 "complete": bool(self.complete)}
 
 
+@dataclass(frozen=True)
+class TrackStats:
+    """The account of a tracked path (``SolutionSet.stats`` of :func:`optkin.track`).
+
+    Attributes
+    ----------
+    points : int
+        Path points asked for (rows of ``qa_path``).
+    reached : int
+        Points followed in the starting assembly mode (the solutions of the set).
+    stopped_at : int or None
+        Index of the first path point not reached (None: every point was).
+    s_stop : float or None
+        Where on the segment ending at ``stopped_at`` the tracking stopped, as a fraction
+        of the segment (0 at its start, 1 at its end); None when nothing stopped it.
+    max_cond : float or None
+        Largest scaled condition number of W_p at the points reached.
+    halvings : int
+        Sub-steps halved by the step control along the whole path.
+    time : float
+        Wall time of the call, seconds.
+    """
+
+    points: int
+    reached: int
+    stopped_at: int | None
+    s_stop: float | None
+    max_cond: float | None
+    halvings: int
+    time: float
+
+    @property
+    def complete(self) -> bool:
+        """True when every point of the path was reached."""
+        return self.stopped_at is None and self.reached == self.points
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"points": int(self.points), "reached": int(self.reached),
+                "stopped_at": None if self.stopped_at is None else int(self.stopped_at),
+                "s_stop": None if self.s_stop is None else float(self.s_stop),
+                "max_cond": None if self.max_cond is None else float(self.max_cond),
+                "halvings": int(self.halvings), "time": float(self.time),
+                "complete": self.complete}
+
+
 @dataclass
 class KinResult:
     """The outcome of one kinematic solve.
@@ -386,10 +431,14 @@ class SolutionSet(Sequence):
         False when nothing was found (status ``"infeasible"``) or the search stopped at a
         limit (``"time_limit"``, ``"iteration_limit"``), or a path at a singularity
         (``"singular"``, :func:`optkin.track`).
+    stats : EnumerationStats or TrackStats
+        The typed account: :class:`EnumerationStats` for a search of every solution
+        (:func:`optkin.assembly_modes`, :func:`optkin.inverse`), :class:`TrackStats` for a
+        tracked path (:func:`optkin.track`).
     info : dict
-        What the producer adds (starts, converged, method, ...).
-    stats : EnumerationStats or None
-        The account of the search where the producer keeps one.
+        Everything else the producer reports, keyed as its docstring lists (the
+        Good-Turing account of the multistart, the homotopy's trace test, the path's
+        determinants, ...): detail for the curious, where ``stats`` is the contract.
     """
 
     def __init__(
@@ -400,7 +449,7 @@ class SolutionSet(Sequence):
         seed: int | None = None,
         dimension: int | None = None,
         components: Sequence[Any] = (),
-        stats: EnumerationStats | None = None,
+        stats: EnumerationStats | TrackStats | None = None,
     ) -> None:
         self._sols = list(solutions)
         self.kind = kind
@@ -412,7 +461,7 @@ class SolutionSet(Sequence):
         #: Positive-dimensional sets of solutions (:class:`optkin.solvers.continua.Component`:
         #: ``dimension`` and sample configurations), apart from the isolated solutions
         self.components = list(components)
-        #: The account of the search (:class:`EnumerationStats`) where the producer keeps one
+        #: The typed account (:class:`EnumerationStats` or :class:`TrackStats`)
         self.stats = stats
 
     @property

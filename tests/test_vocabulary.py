@@ -237,6 +237,19 @@ def test_every_result_of_every_public_function_keeps_the_contract(walk):
         check_result(res, where)
 
 
+def test_every_solution_set_carries_typed_statistics(walk):
+    """``SolutionSet.stats`` is a typed record (a frozen dataclass of plain fields) from
+    every producer, and its ``to_dict`` is what ``SolutionSet.to_dict`` reports."""
+    sets = [(w, r) for w, r in walk.results if isinstance(r, optkin.SolutionSet)]
+    assert {w.split("(")[0] for w, _ in sets} >= {"assembly_modes", "inverse", "track"}
+    for where, s in sets:
+        assert type(s.stats) in (results.EnumerationStats, results.TrackStats), where
+        assert dataclasses.is_dataclass(s.stats) and s.stats.__dataclass_params__.frozen
+        d = s.to_dict()
+        assert d["stats"] == json.loads(json.dumps(s.stats.to_dict())), where
+        assert d["complete"] is s.complete is bool(s.stats.complete), where
+
+
 def test_every_public_function_is_driven_and_every_result_class_met(walk):
     assert set(FUNCTIONS) - walk.called == set(), "public functions not driven here"
     met = {type(r) for _, r in walk.results}

@@ -112,6 +112,7 @@ from ..results import (
     KinResult,
     SolutionSet,
     SolverStats,
+    TrackStats,
     jsonable,
 )
 from .common import (
@@ -1413,7 +1414,9 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
     Returns
     -------
     SolutionSet
-        ``kind="path"``: one :class:`KinResult` per path point reached. ``info``: ``status``
+        ``kind="path"``: one :class:`KinResult` per path point reached; ``stats`` the typed
+        account (:class:`optkin.results.TrackStats`: points, reached, stopped_at, s_stop,
+        max_cond, halvings, time). ``info``: ``status``
         (``"optimal"`` when the whole path was followed), ``success``, ``stopped_at`` (index of
         the first point not reached, None when complete), ``s_stop`` (fraction of the segment
         into it where the path stopped, or where det W_p crosses zero, interpolated),
@@ -1586,7 +1589,10 @@ def track(mech: Mechanism, qa_path: Any, guess: Any = None, **options: Any) -> S
         "halvings": halvings,
         "time": timer() - t0,
     }
-    return SolutionSet(pts, "path", info)
+    stats = TrackStats(points=int(P.shape[0]), reached=len(pts), stopped_at=stopped,
+                       s_stop=s_stop, max_cond=info["max_cond"], halvings=halvings,
+                       time=info["time"])
+    return SolutionSet(pts, "path", info, stats=stats)
 
 
 # ---------------------------------------------------------------------------------------------

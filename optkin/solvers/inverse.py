@@ -122,9 +122,11 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
                 sols.append(qb)
             if not sols:
                 label = model.leg_labels[part.leg]
+                # every branch of the leg's closed form examined: "none" is the whole answer
                 return SolutionSet([], "postures", {
-                    "success": False, "status": INFEASIBLE,
-                    "message": f"leg {part.leg + 1} ({label}) cannot reach this pose"})
+                    "success": False, "status": INFEASIBLE, "complete": True,
+                    "message": f"leg {part.leg + 1} ({label}) cannot reach this pose"},
+                    stats=EnumerationStats("closed-form", 0, 0, 0, 0, 0, 0, True))
             per_part.append([_patch(nq, part.q, q_) for q_ in sols])
         else:
             searched = True
@@ -134,9 +136,11 @@ def _inverse(model: Model, T: np.ndarray, opts: dict[str, Any]) -> SolutionSet:
             if not sols and part.leg >= 0:
                 label = model.leg_labels[part.leg]
                 return SolutionSet([], "postures", {
-                    "success": False, "status": INFEASIBLE, "starts": runs,
+                    "success": False, "status": INFEASIBLE, "starts": runs, "complete": False,
                     "message": f"leg {part.leg + 1} ({label}) cannot reach this pose "
-                               f"({n} starts)"})
+                               f"({n} starts)"},
+                    seed=seed, stats=EnumerationStats("multistart", runs, converged, 0, 0,
+                                                      max(0, runs - converged), None, False))
             per_part.append(sols)
     act = np.array(mech.actuated)
     out: list[KinResult] = []
