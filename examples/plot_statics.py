@@ -122,7 +122,7 @@ ws = statics.wrench_feasible_workspace(m3, box, 2.0, grid=(29, 23),
                                        bounds=[[0.3, 3.6], [0.2, 2.8]], fixed=[0.0, 0.0, 0.1])
 print(ws.message)
 fig, ax = plt.subplots(figsize=(7.5, 5.6))
-statics.plot_workspace(ws, ax=ax, title=f"3-RPR at phi = 0.1: wrench-feasible for "
+statics.plot_workspace(ws, ax=ax, title=f"3-RPR at $\\phi$ = 0.1: wrench-feasible for "
                                         f"{ws.fraction:.0%} of the reachable poses")
 ax.title.set_fontsize(11)
 fig.tight_layout()

@@ -41,6 +41,14 @@ __all__ = ["SingularityMap", "singularity_map", "plot_singularity_map", "MEASURE
 
 MEASURES = ("distance", "parallel", "serial", "manipulability")
 
+#: What each measure is, for the colour bar (classify's relative margins)
+_MEASURE_LABELS = {
+    "distance": "margin to the nearest singularity (min of parallel, serial)",
+    "parallel": r"parallel margin ($\sigma_{min}(A)$ / $\|[A\ B]\|$, scaled)",
+    "serial": r"serial margin (least leg's $|B_i|$ / $|[A_i\ B_i]|$)",
+    "manipulability": "manipulability (product of singular values)",
+}
+
 
 @dataclass
 class SingularityMap:
@@ -366,7 +374,7 @@ def _draw_map(fig: Any, axp: Any, sm: SingularityMap, Z: np.ndarray, measure: st
                           cmap="viridis", vmin=lo, rasterized=True)  # (small vector files)
     extend = "min" if finite.size and finite.min() < lo else "neither"
     cb = fig.colorbar(mesh, ax=axp, extend=extend)
-    cb.set_label(("log10 " if log else "") + measure)
+    cb.set_label(("log10 " if log else "") + _MEASURE_LABELS[measure], fontsize=8)
     axp.set_xlabel(sm.axes[0])
     axp.set_ylabel(sm.axes[1])
     fx = ", ".join(f"{k}={v:.3g}" for k, v in sm.fixed.items())

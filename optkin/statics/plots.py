@@ -131,6 +131,7 @@ def plot_workspace(
         if np.any(np.isfinite(Z)) and np.nanmin(Z) < 0 < np.nanmax(Z):
             ax.contour(X, Y, np.nan_to_num(Z, nan=-lim), levels=[0.0], colors="k",
                        linewidths=1.2)
+            ax.plot([], [], "k-", lw=1.2, label="margin 0: boundary of the feasible set")
     else:
         pc = ax.scatter(P[:, 0], P[:, 1], c=M, cmap="RdYlGn", vmin=-lim, vmax=lim, s=18)
     st = np.array(res.point_status)
@@ -144,8 +145,9 @@ def plot_workspace(
     ax.set_xlabel(res.axes[0])
     ax.set_ylabel(res.axes[1])
     ax.set_aspect("equal", adjustable="box")
-    if un.any() or sg.any():
-        ax.legend(loc="upper right", fontsize=8)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), fontsize=8, frameon=False,
+                  ncols=3)
     ax.set_title(title or f"wrench-feasible workspace: {res.fraction:.0%} of reachable poses",
                  fontsize=10)
     if new:
