@@ -205,7 +205,7 @@ def test_pictures(tmp_path, asp, five_bar):
             assert texts[k].startswith(f"aspect {k + 1} (det A {'+' if a.det_sign > 0 else '-'})")
             assert f"area {a.area:.3g}" in texts[k]
         assert "parallel singularity" in texts
-    assert fig.axes[len(asp.working_modes)].get_xlabel() == "theta1 of leg 1 (rad)"
+    assert fig.axes[len(asp.working_modes)].get_xlabel() == r"$\theta_{1}$ of leg 1 (rad)"
     # the joint-space masks rasterized: the vector file stays small (77 MB before)
     svg = tmp_path / "aspects.svg"
     asp.plot(str(svg))

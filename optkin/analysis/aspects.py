@@ -796,8 +796,9 @@ def _mode_str(mode: tuple[int, ...]) -> str:
 
 
 def _joint_label(name: str) -> str:
-    """A joint's axis label for people: ``L1.theta1`` -> "theta1 of leg 1 (rad)"; lengths
-    (rho, d, r) without a unit (the mechanism's own); other names as they are."""
+    """A joint's axis label for people: ``L1.theta1`` -> "$\\theta_{1}$ of leg 1 (rad)" (Greek
+    names as symbols); lengths (rho, d, r) without a unit (the mechanism's own); other
+    names as they are."""
     import re
 
     m = re.fullmatch(r"L(\d+)\.([A-Za-z]+)(\d*)", name)
@@ -805,7 +806,10 @@ def _joint_label(name: str) -> str:
         return name
     leg, kind, k = m.groups()
     unit = " (rad)" if kind in ("theta", "th", "q", "phi", "alpha") else ""
-    return f"{kind}{k} of leg {leg}{unit}"
+    greek = {"theta": "theta", "th": "theta", "phi": "phi", "alpha": "alpha", "rho": "rho"}
+    sym = f"$\\{greek[kind]}" if kind in greek else f"${kind}"
+    sym += f"_{{{k}}}$" if k else "$"
+    return f"{sym} of leg {leg}{unit}"
 
 
 def _face_patch(f: Face, **kw):
