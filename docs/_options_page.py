@@ -19,6 +19,11 @@ TABLES = [
     ("optkin.solvers.enumerate", "TRACK_DEFAULTS", "optkin.track"),
     ("optkin.solvers.batch", "BATCH_DEFAULTS", "optkin.forward_batch"),
     ("optkin.analysis.singularity", "CLASSIFY_DEFAULTS", "optkin.classify"),
+    ("optkin.analysis.surfaces", "SINGULAR_SURFACES_DEFAULTS", "optkin.singular_surfaces"),
+    ("optkin.analysis.cusps", "CUSP_CURVES_DEFAULTS", "optkin.cusp_curves"),
+    ("optkin.analysis.cusps", "IS_CUSPIDAL_DEFAULTS", "optkin.is_cuspidal"),
+    ("optkin.analysis.cusps", "MODE_CHANGE_DEFAULTS", "optkin.mode_change_path"),
+    ("optkin.analysis.aspects3d", "ASPECTS3D_DEFAULTS", "optkin.aspects3d"),
     ("optkin.statics.core", "STATICS_DEFAULTS", "the functions of optkin.statics"),
 ]
 

@@ -59,7 +59,7 @@ def test_the_options_page_lists_every_defaults_dict():
         sys.path.remove(str(DOCS))
     found = set()
     for src in (DOCS.parent / "optkin").rglob("*.py"):
-        found |= set(re.findall(r"^([A-Z][A-Z_]*_DEFAULTS)\b.*=", src.read_text(), flags=re.M))
+        found |= set(re.findall(r"^([A-Z][A-Z0-9_]*_DEFAULTS)\b.*=", src.read_text(), flags=re.M))
     assert found == {name for _, name, _ in TABLES}
     text = options_markdown()
     assert "| `tol` | `1e-10` | max \\|Phi\\| for a converged start |" in text  # a comment kept

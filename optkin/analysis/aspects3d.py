@@ -48,7 +48,20 @@ from ..model import get_model
 from ..results import OPTIMAL, TIME_LIMIT, jsonable
 from .planar import Face, face_arc_area, point_in_face
 
-__all__ = ["Aspect3D", "Aspects3D", "aspects3d"]
+__all__ = ["Aspect3D", "Aspects3D", "aspects3d", "ASPECTS3D_DEFAULTS"]
+
+#: Options of :func:`aspects3d` and their defaults.
+ASPECTS3D_DEFAULTS: dict[str, Any] = {
+    "limits": None,  # actuator strokes, dict name -> (lo, hi) (None: unlimited)
+    "bounds": None,  # box [[lo, hi], [lo, hi]] in (x, y) (None: the reach of the legs)
+    "slices": 36,  # sections spread evenly over [-pi, pi) before refinement (>= 4)
+    "min_gap": 1e-3,  # smallest gap in phi the refinement bisects down to (rad, > 0)
+    "modes": True,  # count the assembly modes each aspect holds at its representative q_a
+    "tiny": 1e-5,  # a face under this fraction of its section's largest area may appear
+    # or vanish between two sections without refinement
+    "step": 0.25,  # largest continuation step of the sections' curves (scaled units, > 0)
+    "time_limit": 300.0,  # seconds (capped by the time budget); past it no gap is refined
+}
 
 
 @dataclass
@@ -276,9 +289,7 @@ class _Find:
         self.up[self.root(a)] = self.root(b)
 
 
-def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: int = 36,
-              min_gap: float = 1e-3, modes: bool = True, tiny: float = 1e-5,
-              step: float = 0.25, time_limit: float = 300.0) -> Aspects3D:
+def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     """The generalized aspects of a 3-DoF planar platform in (x, y, phi), linked from
     exact sections at ``slices`` orientations (see the module docstring).
 
@@ -287,6 +298,12 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
     mech : Mechanism
         A 3-DoF planar platform with distance legs (what :func:`optkin.aspects` takes with
         ``fixed={"phi": value}``).
+    **options
+        The options below, by keyword, over :data:`ASPECTS3D_DEFAULTS` (an unknown name
+        raises :class:`~optkin.MechanismError`).
+
+    Other Parameters
+    ----------------
     limits : dict name -> (lo, hi), optional
         Actuator strokes.
     bounds : [[lo, hi], [lo, hi]], optional
@@ -304,7 +321,6 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
         Largest continuation step of the sections' curves (scaled units; the step still
         adapts to their turning). 0.25 by default: on the cuspidal 3-RPR the volumes
         then agree with a 240^3 grid to 4e-4, in half the time of the default 0.08.
-
     time_limit : float
         Seconds (capped by the time budget); past it no gap is refined any more and the
         result says so (``success=False``, status ``"time_limit"``).
@@ -313,18 +329,25 @@ def aspects3d(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: i
     -------
     Aspects3D
     """
-    from .._checks import check_mechanism, check_number
+    from .._checks import check_mechanism, check_option
     from ..limits import Deadline, time_budget
+    from ..solvers.common import merge_options
 
-    min_gap = check_number(min_gap, "aspects3d: min_gap", lo=0.0, lo_open=True)
-    tiny = check_number(tiny, "aspects3d: tiny", lo=0.0)
-    step = check_number(step, "aspects3d: step", lo=0.0, lo_open=True)
-    deadline = Deadline(min(check_number(time_limit, "aspects3d: time_limit", lo=0.0, lo_open=True),
-                            time_budget()))
+    who = "aspects3d"
+    opts = merge_options(ASPECTS3D_DEFAULTS, options, who)
+
+    def num(name: str, **kw: Any) -> Any:
+        return check_option(opts, name, who, ASPECTS3D_DEFAULTS, **kw)
+
+    limits, bounds, modes = opts["limits"], opts["bounds"], opts["modes"]
+    min_gap = num("min_gap", lo=0.0, lo_open=True)
+    tiny = num("tiny", lo=0.0)
+    step = num("step", lo=0.0, lo_open=True)
+    deadline = Deadline(min(num("time_limit", lo=0.0, lo_open=True), time_budget()))
     from .aspects import aspects
 
     t0 = time.perf_counter()
-    slices = check_number(slices, "aspects3d: slices", integer=True, lo=4, default=36)
+    slices = num("slices", integer=True, lo=4)
     check_mechanism(mech, "aspects3d")
     model = get_model(mech)
     turn = [n for n, a in zip(model.x_names, model.x_angle) if a]

@@ -34,14 +34,42 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import check_mechanism, check_number
+from .._checks import check_mechanism, check_number, check_option
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
 from ..results import INACCURATE, INFEASIBLE, OPTIMAL, TIME_LIMIT, jsonable
 
 __all__ = ["ModeChangePath", "mode_change_path", "Cuspidality", "is_cuspidal", "CuspCurves",
-           "cusp_curves"]
+           "cusp_curves", "MODE_CHANGE_DEFAULTS", "IS_CUSPIDAL_DEFAULTS", "CUSP_CURVES_DEFAULTS"]
+
+#: Options of :func:`mode_change_path` and their defaults.
+MODE_CHANGE_DEFAULTS: dict[str, Any] = {
+    "radius": None,  # of the loops about each cusp (None: 2 % of the section's extent)
+    "angles": 12,  # entry points tried on each circle, both orientations from each (>= 1)
+    "depth": 4,  # largest number of loops chained (>= 1)
+    "bounds": None,  # the section's box [[lo, hi], [lo, hi]] (None: singular_curves' box)
+    "points": 240,  # points per circle, the segments a quarter of it (>= 1)
+    "curves": None,  # the section's SingularCurves with cusps, when already traced
+    "time_limit": 120.0,  # seconds for the search (capped by the time budget)
+}
+
+#: Options of :func:`is_cuspidal` and their defaults.
+IS_CUSPIDAL_DEFAULTS: dict[str, Any] = {
+    "radius": None,  # of the circles about each cusp (None: 2 % of the section's extent)
+    "bounds": None,  # the sections' box [[lo, hi], [lo, hi]] (None: singular_curves' box)
+    "angles": 8,  # points on each circle where the assembly modes are followed (>= 1)
+    "time_limit": 120.0,  # seconds for the search (capped by the time budget)
+}
+
+#: Options of :func:`cusp_curves` and their defaults.
+CUSP_CURVES_DEFAULTS: dict[str, Any] = {
+    "limits": None,  # actuator strokes, dict name -> (lo, hi): cusps outside are left out
+    "bounds": None,  # the sections' box [[lo, hi], [lo, hi]] (None: singular_curves' box)
+    "slices": 40,  # sections over the first actuated joint's stroke or range (>= 1)
+    "slope": 4.0,  # largest move in the other actuated joints per unit of the first (> 0)
+    "time_limit": 300.0,  # seconds (capped by the time budget); later sections left out
+}
 
 
 @dataclass
@@ -322,10 +350,8 @@ def _check_qa_arg(model, qa, who):
     return qa
 
 
-def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
-                     radius: float | None = None, angles: int = 12, depth: int = 4,
-                     bounds: Any = None, points: int = 240,
-                     curves: Any = None, time_limit: float = 120.0) -> ModeChangePath:
+def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any,
+                     **options: Any) -> ModeChangePath:
     """A joint-space loop from ``qa`` back to ``qa`` that takes assembly mode ``start`` to
     ``target`` without meeting a parallel singularity (see the module docstring).
 
@@ -340,6 +366,12 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
     start, target : int, KinResult or array
         Assembly modes at ``qa``: indices into ``optkin.assembly_modes(mech, qa)`` (sorted
         as it returns them) or its results / their x.
+    **options
+        The options below, by keyword, over :data:`MODE_CHANGE_DEFAULTS` (an unknown name
+        raises :class:`~optkin.MechanismError`).
+
+    Other Parameters
+    ----------------
     radius : float, optional
         Radius of the loops about each cusp (default: 2 % of the section's extent).
     angles : int
@@ -364,20 +396,25 @@ def mode_change_path(mech: Mechanism, qa: Any, start: Any, target: Any, *,
         chain of loops joined them (the message lists what was tried).
     """
     from ..limits import Deadline, time_budget
+    from ..solvers.common import merge_options
     from ..solvers.enumerate import assembly_modes
 
     t0 = time.perf_counter()
     who = "mode_change_path"
-    deadline = Deadline(min(check_number(time_limit, f"{who}: time_limit", lo=0.0, lo_open=True),
-                            time_budget()))
-    if radius is not None:
-        radius = check_number(radius, f"{who}: radius", lo=0.0, lo_open=True)
+    opts = merge_options(MODE_CHANGE_DEFAULTS, options, who)
+
+    def num(name: str, **kw: Any) -> Any:
+        return check_option(opts, name, who, MODE_CHANGE_DEFAULTS, **kw)
+
+    bounds, curves = opts["bounds"], opts["curves"]
+    deadline = Deadline(min(num("time_limit", lo=0.0, lo_open=True), time_budget()))
+    radius = num("radius", lo=0.0, lo_open=True, optional=True)
     check_mechanism(mech, who)
     model = get_model(mech)
     qa = _check_qa_arg(model, qa, who)
-    angles = check_number(angles, f"{who}: angles", integer=True, lo=1, default=12)
-    depth = check_number(depth, f"{who}: depth", integer=True, lo=1, default=4)
-    points = check_number(points, f"{who}: points", integer=True, lo=1, default=240)
+    angles = num("angles", integer=True, lo=1)
+    depth = num("depth", integer=True, lo=1)
+    points = num("points", integer=True, lo=1)
     modes = assembly_modes(mech, qa)
     if len(modes) < 2:
         raise MechanismError(f"{who}: qa has {len(modes)} assembly mode(s); a mode change "
@@ -502,8 +539,7 @@ class Cuspidality:
                          "evidence": self.evidence})
 
 
-def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = None,
-                bounds: Any = None, angles: int = 8, time_limit: float = 120.0) -> Cuspidality:
+def is_cuspidal(mech: Mechanism, sections: Any = None, **options: Any) -> Cuspidality:
     """Look for an assembly-mode change without a singularity near the cusps of joint-space
     sections; ``cuspidal=True`` comes with the path that proves it (``evidence``).
 
@@ -514,22 +550,55 @@ def is_cuspidal(mech: Mechanism, sections: Any = None, radius: float | None = No
     one sign all along, is the evidence. ``cuspidal`` is None when none did: not a proof
     of the contrary (the message says what was tried). ``time_limit`` (s, capped by the
     time budget) stops the search; the message says so.
+
+    Parameters
+    ----------
+    mech : Mechanism
+        A 2- or 3-DoF mechanism whose singular curves :func:`optkin.singular_curves`
+        traces in the joint space.
+    sections : sequence of float, optional
+        Values of the first actuated joint (3 actuated joints; ignored for 2) whose
+        sections are searched (default: five values between 0.6 and 1.6 times the
+        mechanism's size).
+    **options
+        The options below, by keyword, over :data:`IS_CUSPIDAL_DEFAULTS` (an unknown name
+        raises :class:`~optkin.MechanismError`).
+
+    Other Parameters
+    ----------------
+    radius : float, optional
+        Radius of the circles about each cusp (default: 2 % of the section's extent).
+    bounds : [[lo, hi], [lo, hi]], optional
+        The sections' box (default: that of :func:`optkin.singular_curves`).
+    angles : int
+        Points on each circle where the assembly modes are taken and followed.
+    time_limit : float
+        Seconds for the search (capped by the time budget).
+
+    Returns
+    -------
+    Cuspidality
     """
     from ..limits import Deadline, time_budget
+    from ..solvers.common import merge_options
     from ..solvers.enumerate import assembly_modes
     from .continuation import _names_of, singular_curves
 
     t0 = time.perf_counter()
     who = "is_cuspidal"
-    deadline = Deadline(min(check_number(time_limit, f"{who}: time_limit", lo=0.0, lo_open=True),
-                            time_budget()))
+    opts = merge_options(IS_CUSPIDAL_DEFAULTS, options, who)
+
+    def num(name: str, **kw: Any) -> Any:
+        return check_option(opts, name, who, IS_CUSPIDAL_DEFAULTS, **kw)
+
+    bounds = opts["bounds"]
+    deadline = Deadline(min(num("time_limit", lo=0.0, lo_open=True), time_budget()))
     check_mechanism(mech, who)
     model = get_model(mech)
     na = model.na
     _check_qa_arg(model, np.zeros(na), who)
-    angles = check_number(angles, f"{who}: angles", integer=True, lo=1, default=8)
-    if radius is not None:
-        radius = check_number(radius, f"{who}: radius", lo=0.0, lo_open=True)
+    angles = num("angles", integer=True, lo=1)
+    radius = num("radius", lo=0.0, lo_open=True, optional=True)
     if na == 3:
         name = _names_of(mech)[0]
         if sections is None:
@@ -654,8 +723,7 @@ class CuspCurves:
         return fig
 
 
-def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices: int = 40,
-                slope: float = 4.0, time_limit: float = 300.0) -> CuspCurves:
+def cusp_curves(mech: Mechanism, **options: Any) -> CuspCurves:
     """The cusp curves of a 3-DoF mechanism in its joint space: the cusps of the sections
     at ``slices`` values of the first actuated joint (over its stroke in ``limits``, else
     its range), each a corrected cusp of a traced singular curve, linked from section to
@@ -665,21 +733,55 @@ def cusp_curves(mech: Mechanism, limits: Any = None, bounds: Any = None, slices:
     The links interpolate between sections; where cusps are born or die in pairs (a
     swallowtail) between two sections a curve ends. ``time_limit`` (s, capped by the time
     budget): the sections not reached are left out and the result says so.
+
+    Parameters
+    ----------
+    mech : Mechanism
+        A mechanism with 3 actuated joints whose singular curves
+        :func:`optkin.singular_curves` traces in the joint space.
+    **options
+        The options below, by keyword, over :data:`CUSP_CURVES_DEFAULTS` (an unknown name
+        raises :class:`~optkin.MechanismError`).
+
+    Other Parameters
+    ----------------
+    limits : dict name -> (lo, hi), optional
+        Actuator strokes: the sections span the first actuated joint's stroke (else its
+        range), and cusps outside the strokes are left out.
+    bounds : [[lo, hi], [lo, hi]], optional
+        The sections' box (default: that of :func:`optkin.singular_curves`).
+    slices : int
+        Sections.
+    slope : float
+        Largest move in the other actuated joints per unit of the first between linked
+        cusps.
+    time_limit : float
+        Seconds (capped by the time budget).
+
+    Returns
+    -------
+    CuspCurves
     """
     from ..limits import Deadline, time_budget
+    from ..solvers.common import merge_options
     from .aspects import _first_range, _limit_map
     from .continuation import _names_of, singular_curves
 
     t0 = time.perf_counter()
     who = "cusp_curves"
-    deadline = Deadline(min(check_number(time_limit, f"{who}: time_limit", lo=0.0, lo_open=True),
-                            time_budget()))
-    slope = check_number(slope, f"{who}: slope", lo=0.0, lo_open=True)
+    opts = merge_options(CUSP_CURVES_DEFAULTS, options, who)
+
+    def num(name: str, **kw: Any) -> Any:
+        return check_option(opts, name, who, CUSP_CURVES_DEFAULTS, **kw)
+
+    limits, bounds = opts["limits"], opts["bounds"]
+    deadline = Deadline(min(num("time_limit", lo=0.0, lo_open=True), time_budget()))
+    slope = num("slope", lo=0.0, lo_open=True)
     check_mechanism(mech, who)
     model = get_model(mech)
     if model.na != 3:
         raise MechanismError(f"{who}: needs 3 actuated joints, {mech.name} has {model.na}")
-    slices = check_number(slices, f"{who}: slices", integer=True, lo=1, default=40)
+    slices = num("slices", integer=True, lo=1)
     names = _names_of(mech)
     lim = _limit_map(mech, names, limits)
     lo, hi = _first_range(who, model, names, lim)

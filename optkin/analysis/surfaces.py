@@ -31,7 +31,17 @@ from ..mechanism import Mechanism
 from ..model import get_model
 from ..results import INACCURATE, OPTIMAL, TIME_LIMIT, jsonable
 
-__all__ = ["SingularSurface", "singular_surfaces"]
+__all__ = ["SingularSurface", "singular_surfaces", "SINGULAR_SURFACES_DEFAULTS"]
+
+#: Options of :func:`singular_surfaces` and their defaults.
+SINGULAR_SURFACES_DEFAULTS: dict[str, Any] = {
+    "limits": None,  # actuator strokes, dict name -> (lo, hi): vertices outside are left out
+    "bounds": None,  # box [[lo, hi], [lo, hi]] of the sections' plane (None: singular_curves')
+    "slices": 72,  # sections (>= 2)
+    "step": 0.25,  # largest continuation step in each section (scaled units, > 0)
+    "link": 0.6,  # largest mean distance between stitched curves, in mechanism sizes (> 0)
+    "time_limit": 300.0,  # seconds (capped by the time budget); later sections left out
+}
 
 
 @dataclass
@@ -136,9 +146,8 @@ def _strip(A: np.ndarray, B: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> list
     return tri
 
 
-def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
-                      bounds: Any = None, slices: int = 72, step: float = 0.25,
-                      link: float = 0.6, time_limit: float = 300.0) -> SingularSurface:
+def singular_surfaces(mech: Mechanism, space: str = "task",
+                      **options: Any) -> SingularSurface:
     """The parallel singularity surface of a 3-DoF planar platform as a triangle mesh
     (see the module docstring).
 
@@ -149,6 +158,12 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
     space : "task" or "joint"
         (x, y, phi), sections at fixed phi over [-pi, pi); or the actuated joints,
         sections at fixed first actuated joint over its stroke (``limits``) or its range.
+    **options
+        The options below, by keyword, over :data:`SINGULAR_SURFACES_DEFAULTS` (an unknown
+        name raises :class:`~optkin.MechanismError`).
+
+    Other Parameters
+    ----------------
     limits : dict name -> (lo, hi), optional
         Actuator strokes: vertices outside them are left out.
     bounds : [[lo, hi], [lo, hi]], optional
@@ -162,22 +177,32 @@ def singular_surfaces(mech: Mechanism, space: str = "task", limits: Any = None,
     time_limit : float
         Seconds (capped by the time budget); the sections not reached are left out and
         the result says so (status ``"time_limit"``).
+
+    Returns
+    -------
+    SingularSurface
     """
-    from .._checks import check_mechanism, check_number
+    from .._checks import check_mechanism, check_option
     from ..limits import Deadline, time_budget
+    from ..solvers.common import merge_options
     from .aspects import _first_range, _limit_map
     from .continuation import _names_of, singular_curves
 
     t0 = time.perf_counter()
     who = "singular_surfaces"
-    deadline = Deadline(min(check_number(time_limit, f"{who}: time_limit", lo=0.0, lo_open=True),
-                            time_budget()))
-    step = check_number(step, f"{who}: step", lo=0.0, lo_open=True)
-    link = check_number(link, f"{who}: link", lo=0.0, lo_open=True)
+    opts = merge_options(SINGULAR_SURFACES_DEFAULTS, options, who)
+
+    def num(name: str, **kw: Any) -> Any:
+        return check_option(opts, name, who, SINGULAR_SURFACES_DEFAULTS, **kw)
+
+    limits, bounds = opts["limits"], opts["bounds"]
+    deadline = Deadline(min(num("time_limit", lo=0.0, lo_open=True), time_budget()))
+    step = num("step", lo=0.0, lo_open=True)
+    link = num("link", lo=0.0, lo_open=True)
     if space not in ("task", "joint"):
         raise MechanismError(f"{who}: space must be 'task' or 'joint', got "
                              f"{space!r}")
-    slices = check_number(slices, f"{who}: slices", integer=True, lo=2, default=72)
+    slices = num("slices", integer=True, lo=2)
     check_mechanism(mech, who)
     model = get_model(mech)
     turn = [n for n, a in zip(model.x_names, model.x_angle) if a]
