@@ -42,7 +42,7 @@ INVERSE_DEFAULTS: dict[str, Any] = {
     "tol": 1e-10,  # max |Phi| (and task error) for a solution
     "starts": 256,  # searched parts: number of Newton starts
     "iters": 60,  # searched parts: Newton iterations per start
-    "seed": 0,
+    "seed": 0,  # searched parts: of the Sobol scrambling (a run is reproducible from it)
 }
 
 #: Largest accepted ``starts`` and ``iters`` (bounded work and memory per call).
