@@ -13,6 +13,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -606,3 +607,44 @@ def test_every_kind_has_a_runner_and_a_model(kind) -> None:
     from optkin.problems.tasks import TASKS
 
     assert kind in TASKS and kind in TASK_MODELS
+
+
+def test_toml_and_python_take_the_same_names_and_defaults() -> None:
+    """A problem file and Python describe mechanisms with the same words and defaults:
+    library arguments are the factories' parameters, and a Khalil row missing a column
+    means the same in both (here ``mu``, ``sigma`` and the geometry left out of every row
+    of the SR400 where they are 0: a passive revolute, as ``sigma = 0`` says)."""
+    import inspect
+
+    from optkin.problems.schema import LIBRARY_ARG_MODELS
+
+    for name, model in LIBRARY_ARG_MODELS.items():
+        params = inspect.signature(optkin.mechanisms.LIBRARY[name]).parameters
+        assert set(model.model_fields) == set(params), name
+        for k, f in model.model_fields.items():  # a TOML default is the library's (None)
+            if f.is_required():
+                assert params[k].default is inspect.Parameter.empty, (name, k)
+            else:
+                assert f.default is None or f.default == params[k].default, (name, k)
+
+    def sparse(row: dict) -> dict:
+        return {k: v for k, v in row.items() if k == "a" or v not in (0, "0")}
+
+    rows = [sparse(r) for r in SR400_ROWS]
+    assert sum("sigma" not in r for r in rows) == 9 and sum("mu" not in r for r in rows) == 4
+    spec = SR400["mechanism"]
+    py = optkin.Mechanism.from_khalil(rows, loops=1, params=spec["params"],
+                                      end_effector=spec["end_effector"])
+    full = optkin.Mechanism.from_khalil(SR400_ROWS, loops=1, params=spec["params"],
+                                        end_effector=spec["end_effector"])
+    toml = check_problem(validate_document(mutate(SR400, "mechanism.rows", rows), "s.toml"),
+                         "s.toml")
+    for m in (py, toml):
+        assert m.topology == full.topology
+        np.testing.assert_array_equal(m.geometry, full.geometry)
+    # a row without its antecedent is refused by both
+    with pytest.raises(optkin.MechanismError, match=r"row 1 \(frame j=1\): missing column"):
+        optkin.Mechanism.from_khalil([{"sigma": 0}])
+    with pytest.raises(ProblemFileError, match=r"rows\[0\]\.a"):
+        check_problem(validate_document(mutate(SR400, "mechanism.rows.0", {"sigma": 0}),
+                                        "s.toml"), "s.toml")

@@ -117,7 +117,7 @@ def _row_dict(row: Any, j: int) -> dict[str, Any]:
                 f"{where}: unknown column(s) {unknown}; the columns are {list(COLUMNS)}",
                 path=path + (str(unknown[0]),)
             )
-        missing = [c for c in ("a", "sigma") if c not in d]
+        missing = [c for c in ("a",) if c not in d]
         if missing:
             raise MechanismError(f"{where}: missing column(s) {missing}", path=path)
         return d
@@ -152,7 +152,9 @@ class KhalilTable:
     ----------
     rows : sequence
         One entry per frame j = 1..n+2B, a mapping with the keys of :data:`COLUMNS` (or a
-        sequence in that order). Geometric entries are numbers or text (a parameter name,
+        sequence in that order). In a mapping only ``a`` is required: ``mu`` and ``sigma``
+        default to 0 (a passive revolute joint) and the geometric columns to 0, as in
+        problem files. Geometric entries are numbers or text (a parameter name,
         ``"pi/2"``, ``"-d8"``). The variable column of a joint (theta for sigma = 0, r for
         sigma = 1) holds the joint's name (``"theta3"``), ``None`` for the default name, or
         a number used as a constant offset.
@@ -211,7 +213,7 @@ class KhalilTable:
                     f"numbered before its successor); renumber the frames from the base outwards",
                     path=at + ("a",)
                 )
-            sigma = _int_col(d, "sigma", where, at)
+            sigma = _int_col(d, "sigma", where, at, default=0)
             if sigma not in (0, 1, 2):
                 raise MechanismError(
                     f"{where}: sigma={sigma} is not a joint type; use 0 (revolute), "
