@@ -11,19 +11,23 @@ import io
 import tokenize
 from pathlib import Path
 
-#: (module, dict, the functions it configures)
+#: (module, dict, the functions it configures, separated by ", ")
 TABLES = [
     ("optkin.solvers.forward", "FORWARD_DEFAULTS", "optkin.forward"),
     ("optkin.solvers.inverse", "INVERSE_DEFAULTS", "optkin.inverse"),
     ("optkin.solvers.enumerate", "ASSEMBLY_DEFAULTS", "optkin.assembly_modes"),
     ("optkin.solvers.enumerate", "TRACK_DEFAULTS", "optkin.track"),
     ("optkin.solvers.batch", "BATCH_DEFAULTS", "optkin.forward_batch"),
+    ("optkin.analysis.velocity", "JACOBIANS_DEFAULTS", "optkin.jacobians"),
+    ("optkin.analysis.mobility", "DOF_DEFAULTS", "optkin.dof"),
     ("optkin.analysis.singularity", "CLASSIFY_DEFAULTS", "optkin.classify"),
     ("optkin.analysis.surfaces", "SINGULAR_SURFACES_DEFAULTS", "optkin.singular_surfaces"),
     ("optkin.analysis.cusps", "CUSP_CURVES_DEFAULTS", "optkin.cusp_curves"),
     ("optkin.analysis.cusps", "IS_CUSPIDAL_DEFAULTS", "optkin.is_cuspidal"),
     ("optkin.analysis.cusps", "MODE_CHANGE_DEFAULTS", "optkin.mode_change_path"),
     ("optkin.analysis.aspects3d", "ASPECTS3D_DEFAULTS", "optkin.aspects3d"),
+    ("optkin.analysis.continuation", "SINGULAR_CURVES_DEFAULTS", "optkin.singular_curves"),
+    ("optkin.analysis.aspects", "ASPECTS_DEFAULTS", "optkin.aspects, optkin.workspace"),
     ("optkin.statics.core", "STATICS_DEFAULTS", "the functions of optkin.statics"),
 ]
 
@@ -57,7 +61,9 @@ def options_markdown() -> str:
     for module, name, target in TABLES:
         defaults = getattr(importlib.import_module(module), name)
         notes = _comments(module, name)
-        role = f"{{func}}`{target}`" if target.startswith("optkin.") and " " not in target else target
+        names = target.split(", ")
+        role = (" and ".join(f"{{func}}`{t}`" for t in names)
+                if all(t.startswith("optkin.") and " " not in t for t in names) else target)
         out += [f"## `{name}`", "", f"Options of {role} (`{module}.{name}`).", "",
                 "| option | default | meaning |", "|---|---|---|"]
         for key, value in defaults.items():

@@ -101,8 +101,10 @@ def test_expressions_within_the_limits_still_evaluate():
     (lambda: optkin.inverse(M.five_bar(1, 1, 1, 1, 1), [0.5, 1.2], starts=10**400),
      r"^inverse: option starts must be"),
     (lambda: optkin.inverse(M.five_bar(1, 1, 1, 1, 1), [10**400, 1.2]), r"^pose: expected"),
-    (lambda: optkin.dof(M.four_bar(4, 4, 2, 2), samples=10**400), r"^dof: samples must be"),
-    (lambda: optkin.dof(M.four_bar(4, 4, 2, 2), seed=10**400), r"^dof: seed must be an integer >= 0 .*too large"),
+    (lambda: optkin.dof(M.four_bar(4, 4, 2, 2), samples=10**400),
+     r"^dof: option samples must be"),
+    (lambda: optkin.dof(M.four_bar(4, 4, 2, 2), seed=10**400),
+     r"^dof: option seed must be a number >= 0 .*too large"),
 ], ids=["forward_qa", "five_bar", "five_bar_1e300", "rpr3_base", "sr400", "params", "column",
         "home", "limits", "mu", "legs", "option_tol", "option_max_iter", "inverse_starts",
         "inverse_pose", "dof_samples", "dof_seed"])

@@ -29,6 +29,8 @@ from hypothesis import strategies as st
 import optkin
 from optkin import MechanismError, limits
 from optkin import mechanisms as M
+from optkin.analysis.aspects import ASPECTS_DEFAULTS
+from optkin.analysis.continuation import SINGULAR_CURVES_DEFAULTS
 from optkin.solvers.batch import BATCH_DEFAULTS
 from optkin.solvers.enumerate import ASSEMBLY_DEFAULTS, TRACK_DEFAULTS
 
@@ -259,7 +261,8 @@ def curve_args(name, region):
         args.update(plane=v["plane"], kind=v["kind"])
         opts.update(tol=st.floats(1e-12, 1e-8), max_steps=st.integers(1, 5000),
                     cusps=st.sampled_from([None, True, False]))
-    return call_args(args, opts, unknown=False)
+    assert set(opts) == set(ASPECTS_DEFAULTS if region else SINGULAR_CURVES_DEFAULTS)
+    return call_args(args, opts)
 
 
 @st.composite

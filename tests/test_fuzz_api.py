@@ -304,7 +304,7 @@ def _forward_inverse(data):
 def _analyses(data):
     m, r, q = _pick(data)
     tol = data.draw(st.one_of(st.just(1e-8), scalar))
-    jac = check(lambda: optkin.jacobians(m, q, tol))
+    jac = check(lambda: optkin.jacobians(m, q, tol=tol))
     if jac is not None and data.draw(st.booleans()):
         rates = data.draw(vectors(m.n_actuated))
         for method in ("joint_rates", "twist", "passive_rates", "x_rates"):
@@ -314,7 +314,7 @@ def _analyses(data):
         samples = data.draw(st.one_of(st.integers(1, 3), scalar))
         seed = data.draw(st.one_of(st.integers(0, 5), scalar))
         rtol = data.draw(st.one_of(st.just(1e-8), scalar))
-        check(lambda: optkin.dof(m, samples, seed, rtol))
+        check(lambda: optkin.dof(m, samples=samples, seed=seed, rtol=rtol))
 
 
 class _Done:

@@ -122,7 +122,7 @@ def test_public_functions_reject_a_non_mechanism(call):
     ({"rtol": -1.0}, "rtol"),
 ])
 def test_dof_rejects_bad_arguments(kw, word):
-    with pytest.raises(MechanismError, match=rf"dof: {word} must be"):
+    with pytest.raises(MechanismError, match=rf"dof: option {word} must be"):
         optkin.dof(M.four_bar(4, 4, 2, 2), **kw)
 
 
@@ -394,15 +394,18 @@ def test_assembly_modes_seed_and_width_are_checked(rpr3, closed):
 
 
 def test_jacobians_tol_is_checked(rpr3, closed):
-    with pytest.raises(MechanismError, match=r"jacobians: tol must be a number > 0"):
+    with pytest.raises(MechanismError, match=r"jacobians: option tol must be a number"):
         optkin.jacobians(rpr3, closed, tol="1e-8")
+    with pytest.raises(MechanismError, match=r"jacobians: option tol must be a number > 0"):
+        optkin.jacobians(rpr3, closed, tol=0.0)
 
 
 @pytest.mark.parametrize("kw, match", [
     ({"grid": -1}, r"^grid: expected an integer >= 2"),
     ({"grid": 2.5}, r"^grid: expected an integer >= 2"),
     ({"step": 0.0}, r"^step: expected a number > 0"),
-    ({"tol": "small"}, r"^tol: expected a number > 0"),
+    ({"tol": "small"}, r"^singular_curves: option tol must be a number"),  # merge_options
+    ({"tol": 0.0}, r"^tol: expected a number > 0"),
     ({"max_steps": 0}, r"^max_steps: expected an integer >= 1"),
     ({"bounds": "a"}, r"^bounds: expected \[\[lo, hi\], \[lo, hi\]\]"),
     ({"bounds": [[1, 0], [0, 1]]}, r"^bounds: expected \[\[lo, hi\], \[lo, hi\]\]"),

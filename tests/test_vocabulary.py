@@ -288,15 +288,16 @@ def test_failures_are_results_in_the_vocabulary(walk):
 def test_seed_is_accepted_by_keyword_everywhere():
     """``seed`` is a keyword argument or an option (``*_DEFAULTS``) of every public function
     that has one, and the two kinds agree on the keyword."""
+    from optkin.analysis.mobility import DOF_DEFAULTS
     from optkin.solvers.enumerate import ASSEMBLY_DEFAULTS
     from optkin.solvers.inverse import INVERSE_DEFAULTS
 
     with_seed = [k for k, f in FUNCTIONS.items() if "seed" in inspect.signature(f).parameters]
-    assert {"optkin.dof", "optkin.design.optimize"} <= set(with_seed)
+    assert {"optkin.design.optimize"} <= set(with_seed)
     for k in with_seed:
         p = inspect.signature(FUNCTIONS[k]).parameters["seed"]
         assert p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY), k
-    assert "seed" in INVERSE_DEFAULTS and "seed" in ASSEMBLY_DEFAULTS
+    assert "seed" in INVERSE_DEFAULTS and "seed" in ASSEMBLY_DEFAULTS and "seed" in DOF_DEFAULTS
     m = M.five_bar(2.0, 1.5, 2.0, 2.0, 1.5)
     a = optkin.assembly_modes(m, [1.2, 1.9], seed=3, method="multistart")
     b = optkin.assembly_modes(m, [1.2, 1.9], seed=4, method="multistart")

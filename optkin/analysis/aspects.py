@@ -53,7 +53,18 @@ from .continuation import (
 )
 from .planar import Face, faces
 
-__all__ = ["Aspect", "Aspects", "Workspace", "aspects", "workspace", "leg_working_modes"]
+__all__ = ["Aspect", "Aspects", "Workspace", "aspects", "workspace", "ASPECTS_DEFAULTS",
+           "leg_working_modes"]
+
+#: Options of :func:`aspects` and :func:`workspace` (the same for both).
+ASPECTS_DEFAULTS: dict[str, Any] = {
+    "limits": None,  # actuated joint limits {name: (lo, hi)} (the passive joints are unlimited)
+    "bounds": None,  # box [[lo, hi], [lo, hi]] in the workspace plane; None: the reach of
+    # the legs
+    "grid": None,  # seeding grid of the continuation per chart axis (None: 32); it only seeds
+    "qa_grid": 200,  # resolution of the joint-space masks (two-leg point platforms), >= 2
+    "step": None,  # largest continuation step, scaled units (None: 0.08)
+}
 
 
 def leg_working_modes(mech: Mechanism) -> list[tuple[int, ...]]:
@@ -412,11 +423,7 @@ def _region_faces(chart, curves, mode, bounds, snap, pidx, fixed_map, lim_map, w
 def aspects(
     mech: Mechanism,
     fixed: Mapping[str, float] | None = None,
-    limits: Mapping[str, tuple[float, float]] | None = None,
-    bounds: Any = None,
-    grid: int | None = None,
-    qa_grid: int = 200,
-    step: float | None = None,
+    **options: Any,
 ) -> Aspects:
     """The generalized aspects of every working mode (Chablat and Wenger 1998).
 
@@ -428,16 +435,24 @@ def aspects(
         a 3-DoF platform in a section at fixed orientation (``fixed={"phi": value}``; the
         aspects are then those of the section). A 3-DoF platform without ``fixed`` gets
         its aspects in (x, y, phi): :func:`optkin.analysis.aspects3d.aspects3d`.
+    fixed : dict, optional
+        The section of a 3-DoF platform, ``{"phi": value}``.
+    **options
+        The options below, by keyword, over :data:`ASPECTS_DEFAULTS` (an unknown name is a
+        :class:`~optkin.MechanismError`).
+
+    Other Parameters
+    ----------------
     limits : dict name -> (lo, hi), optional
         Actuated joint limits (the passive joints are unlimited).
     bounds : [[lo, hi], [lo, hi]], optional
         A box in the workspace plane (default: the reach of the legs).
     grid : int, optional
-        Seeding grid of the continuation (it only seeds).
+        Seeding grid of the continuation (default 32; it only seeds).
     qa_grid : int
-        Resolution of the joint-space masks QA_ij (two-leg point platforms).
+        Resolution of the joint-space masks QA_ij (two-leg point platforms; default 200).
     step : float, optional
-        Continuation step (scaled units).
+        Continuation step (scaled units; default 0.08).
 
     Returns
     -------
@@ -465,6 +480,11 @@ def aspects(
     [2, 3, 3, 2]
     """
     t0 = time.perf_counter()
+    from ..solvers.common import merge_options
+
+    o = merge_options(ASPECTS_DEFAULTS, options, "aspects")
+    limits, bounds, grid, qa_grid, step = (o["limits"], o["bounds"], o["grid"],
+                                           o["qa_grid"], o["step"])
     if fixed is None and isinstance(mech, Mechanism):
         model = get_model(mech)
         chart = planar_chart(model)
@@ -609,11 +629,7 @@ def _ring_dist(P: np.ndarray, f: Face) -> np.ndarray:
 def workspace(
     mech: Mechanism,
     fixed: Mapping[str, float] | None = None,
-    limits: Mapping[str, tuple[float, float]] | None = None,
-    bounds: Any = None,
-    grid: int | None = None,
-    step: float | None = None,
-    qa_grid: int = 200,
+    **options: Any,
 ) -> Workspace:
     """The reachable workspace in the plane, per working mode and in total.
 
@@ -625,7 +641,15 @@ def workspace(
     ----------
     mech : Mechanism
         As for :func:`aspects`.
-    fixed, limits, bounds, grid, step, qa_grid
+    fixed : dict, optional
+        As for :func:`aspects`.
+    **options
+        The options below, by keyword, over :data:`ASPECTS_DEFAULTS` (an unknown name is a
+        :class:`~optkin.MechanismError`).
+
+    Other Parameters
+    ----------------
+    limits, bounds, grid, qa_grid, step
         As for :func:`aspects` (``qa_grid``: the joint-space images of the working modes,
         two-leg point platforms).
 
@@ -648,6 +672,11 @@ def workspace(
     245.1
     """
     t0 = time.perf_counter()
+    from ..solvers.common import merge_options
+
+    o = merge_options(ASPECTS_DEFAULTS, options, "workspace")
+    limits, bounds, grid, qa_grid, step = (o["limits"], o["bounds"], o["grid"],
+                                           o["qa_grid"], o["step"])
     fixed, names, chart = _check_plane(mech, fixed)
     qa_grid = check_number(qa_grid, "qa_grid", integer=True, lo=2)
     lim_map = _limit_map(mech, names, limits)

@@ -49,11 +49,26 @@ from ..model.charts import PlanarChart, planar_chart
 from ..model.compiled import FastFn
 from ..results import INACCURATE, MEMORY_LIMIT, OPTIMAL, TIME_LIMIT, jsonable
 
-__all__ = ["Curve", "SingularCurves", "singular_curves", "augmented_system"]
+__all__ = ["Curve", "SingularCurves", "singular_curves", "SINGULAR_CURVES_DEFAULTS",
+           "augmented_system"]
 
 TWO_PI = 2.0 * np.pi
 #: Largest continuation step, in scaled units (lengths / mechanism size, radians).
 DEFAULT_STEP = 0.08
+
+#: Options of :func:`singular_curves`.
+SINGULAR_CURVES_DEFAULTS: dict[str, Any] = {
+    "bounds": None,  # box [[lo, hi], [lo, hi]] in the plane the curves stop on; None: the
+    # reach of the legs, [-pi, pi] for angles (periodic when their range is 2 pi)
+    "grid": None,  # seeding grid per chart axis (None: 32); it only seeds the continuation
+    "limits": None,  # actuated joint limits {name: (lo, hi)}, traced by kind="limit"
+    "step": None,  # largest continuation step, scaled units (None: DEFAULT_STEP = 0.08)
+    "tol": 1e-11,  # corrector tolerance on max |G|
+    "max_steps": None,  # continuation steps each way along one curve (None: 20000, lowered
+    # to what the memory budget allows)
+    "cusps": None,  # detect cusps of the parallel curves (None: when the plane is the joint
+    # space of a section)
+}
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -1103,13 +1118,7 @@ def singular_curves(
     plane: Any = "joint",
     kind: str | Sequence[str] = "parallel",
     fixed: Mapping[str, float] | None = None,
-    bounds: Any = None,
-    grid: int | None = None,
-    limits: Mapping[str, tuple[float, float]] | None = None,
-    step: float | None = None,
-    tol: float = 1e-11,
-    max_steps: int | None = None,
-    cusps: bool | None = None,
+    **options: Any,
 ) -> SingularCurves:
     """Trace the singular loci of a mechanism in a plane by pseudo-arclength continuation.
 
@@ -1129,6 +1138,12 @@ def singular_curves(
         ``"all"`` (parallel + serial + limit).
     fixed : dict, optional
         Section values, e.g. ``{"phi": 0.3}`` or ``{"L1.rho": 17.0}`` for a 3-DoF mechanism.
+    **options
+        The options below, by keyword, over :data:`SINGULAR_CURVES_DEFAULTS` (an unknown
+        name is a :class:`~optkin.MechanismError`).
+
+    Other Parameters
+    ----------------
     bounds : [[lo, hi], [lo, hi]], optional
         A box in the plane; curves stop on it (angles are periodic when their range is
         2 pi, the default). Default: the reach of the legs, [-pi, pi] for angles.
@@ -1140,7 +1155,7 @@ def singular_curves(
         Largest continuation step in scaled units (lengths / mechanism size, radians);
         default :data:`DEFAULT_STEP`.
     tol : float
-        Corrector tolerance on max ``|G|``.
+        Corrector tolerance on max ``|G|`` (default 1e-11).
     max_steps : int, optional
         Largest number of continuation steps each way along one curve (default 20000,
         lowered to what the memory budget allows when not given).
@@ -1178,8 +1193,12 @@ def singular_curves(
     >>> r.count, r.success, r.max_residual < 1e-9
     (3, True, True)
     """
-    return _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol,
-                            max_steps, cusps, None, "singular_curves")
+    from ..solvers.common import merge_options
+
+    o = merge_options(SINGULAR_CURVES_DEFAULTS, options, "singular_curves")
+    return _singular_curves(mech, plane, kind, fixed, o["bounds"], o["grid"], o["limits"],
+                            o["step"], o["tol"], o["max_steps"], o["cusps"], None,
+                            "singular_curves")
 
 
 def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, max_steps,

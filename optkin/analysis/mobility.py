@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from .. import numeric
-from .._checks import as_float, as_int, check_mechanism, check_number
+from .._checks import as_float, as_int, check_mechanism, check_option
 from .._dryrun import checkpoint
 from ..errors import NumericError
 from ..mechanism import Mechanism
@@ -37,10 +37,18 @@ from ..model.analysis import analysis_functions, z_of
 from ..model.analysis import joint_inventory as _joint_inventory
 from ..results import INFEASIBLE, OPTIMAL, jsonable
 
-__all__ = ["DofReport", "dof", "closed_configurations", "joint_inventory", "MAX_SAMPLES"]
+__all__ = ["DofReport", "dof", "DOF_DEFAULTS", "closed_configurations", "joint_inventory",
+           "MAX_SAMPLES"]
 
 #: Largest number of closed configurations :func:`dof` samples.
 MAX_SAMPLES = 1000
+
+#: Options of :func:`dof`.
+DOF_DEFAULTS: dict[str, Any] = {
+    "samples": 5,  # random closed configurations for [7.58]/[7.59] (1 to MAX_SAMPLES)
+    "seed": 0,  # of the random starts (a run is reproducible)
+    "rtol": 1e-8,  # relative singular-value threshold of the rank (scaled Jacobian), in (0, 1)
+}
 
 
 @dataclass
@@ -239,18 +247,26 @@ def rank_of(s: np.ndarray, rtol: float) -> int:
     return int(np.sum(s > rtol * s[0]))
 
 
-def dof(mech: Mechanism, samples: int = 5, seed: int = 0, rtol: float = 1e-8) -> DofReport:
+def dof(mech: Mechanism, **options: Any) -> DofReport:
     """Degrees of freedom of ``mech``: Grubler's count and the rank-based mobility.
 
     Parameters
     ----------
     mech : Mechanism
+    **options
+        The options below, by keyword, over :data:`DOF_DEFAULTS` (an unknown name is a
+        :class:`~optkin.MechanismError`).
+
+    Other Parameters
+    ----------------
     samples : int
-        Number of random closed configurations for [7.58]/[7.59].
+        Number of random closed configurations for [7.58]/[7.59] (default 5, at most
+        :data:`MAX_SAMPLES`).
     seed : int
-        Seed of the random starts.
+        Seed of the random starts (default 0).
     rtol : float
-        Relative singular-value threshold for the rank (of the scaled Jacobian).
+        Relative singular-value threshold for the rank (of the scaled Jacobian; default
+        1e-8).
 
     Returns
     -------
@@ -264,12 +280,15 @@ def dof(mech: Mechanism, samples: int = 5, seed: int = 0, rtol: float = 1e-8) ->
     >>> (r.grubler, r.mobility, r.agree)
     (1, 1, True)
     """
+    from ..solvers.common import merge_options
+
+    opts = merge_options(DOF_DEFAULTS, options, "dof")
     check_mechanism(mech, "dof")
-    samples = check_number(samples, "dof: samples", integer=True, lo=1, hi=MAX_SAMPLES,
-                           default=5, path=("samples",))
-    rtol = check_number(rtol, "dof: rtol", lo=0.0, hi=1.0, lo_open=True, hi_open=True,
-                        default=1e-8, path=("rtol",))
-    seed = check_number(seed, "dof: seed", integer=True, lo=0, default=0, path=("seed",))
+    samples = check_option(opts, "samples", "dof", DOF_DEFAULTS, integer=True, lo=1,
+                           hi=MAX_SAMPLES)
+    rtol = check_option(opts, "rtol", "dof", DOF_DEFAULTS, lo=0.0, hi=1.0, lo_open=True,
+                        hi_open=True)
+    seed = check_option(opts, "seed", "dof", DOF_DEFAULTS, integer=True, lo=0)
     checkpoint()  # validation stops here: every argument is checked
     inv = joint_inventory(mech)
     freedoms = inv["freedoms"]

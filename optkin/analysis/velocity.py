@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from .. import numeric
-from .._checks import as_vector, check_mechanism, check_number
+from .._checks import as_vector, check_mechanism, check_option
 from .._checks import show as _show
 from .._dryrun import checkpoint
 from ..errors import MechanismError
@@ -48,7 +48,13 @@ from ..model.analysis import analysis_functions, leg_labels, platform_unknowns_o
 from ..model.analysis import twist_rows as _twist_rows
 from ..results import INFEASIBLE, OPTIMAL, SINGULAR, KinResult, jsonable
 
-__all__ = ["Jacobians", "jacobians", "config_of", "twist_rows", "TWIST_NAMES"]
+__all__ = ["Jacobians", "jacobians", "JACOBIANS_DEFAULTS", "config_of", "twist_rows",
+           "TWIST_NAMES"]
+
+#: Options of :func:`jacobians`.
+JACOBIANS_DEFAULTS: dict[str, Any] = {
+    "tol": 1e-8,  # largest closure residual max|Phi| (model units) for success
+}
 
 TWIST_NAMES = ("vx", "vy", "vz", "wx", "wy", "wz")
 
@@ -284,7 +290,7 @@ def _spatial_from_twist(J6: np.ndarray, p: np.ndarray) -> np.ndarray:
     return np.vstack([w, vs])
 
 
-def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
+def jacobians(mech: Mechanism, q: Any, **options: Any) -> Jacobians:
     """Velocity model of ``mech`` at the closed configuration ``q``.
 
     Parameters
@@ -293,8 +299,15 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
     q : array or KinResult
         All joint values (``mech.joint_names`` order, as ``KinResult.q``) or a result of
         :func:`optkin.forward` / :func:`optkin.inverse`.
+    **options
+        The options below, by keyword, over :data:`JACOBIANS_DEFAULTS` (an unknown name is a
+        :class:`~optkin.MechanismError`).
+
+    Other Parameters
+    ----------------
     tol : float
-        Largest closure residual max|Phi| (in the model's units) for ``success``.
+        Largest closure residual max|Phi| (in the model's units) for ``success``
+        (default 1e-8).
 
     Returns
     -------
@@ -314,8 +327,10 @@ def jacobians(mech: Mechanism, q: Any, tol: float = 1e-8) -> Jacobians:
     >>> np.round(jac.W @ [0, 1, 0, 0, 0, 0], 12).tolist()   # [7.41]: theta3dot = -theta2dot
     [-1.0, 1.0]
     """
-    tol = check_number(tol, "jacobians: tol", lo=0.0, lo_open=True, default=1e-8,
-                       path=("tol",))
+    from ..solvers.common import merge_options
+
+    opts = merge_options(JACOBIANS_DEFAULTS, options, "jacobians")
+    tol = check_option(opts, "tol", "jacobians", JACOBIANS_DEFAULTS, lo=0.0, lo_open=True)
     check_mechanism(mech, "jacobians")
     model = get_model(mech)
     f = analysis_functions(model)

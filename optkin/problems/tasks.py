@@ -305,14 +305,15 @@ def _generic(res: Any) -> dict[str, Any]:
 
 
 def _accepts(fn: Callable[..., Any], name: str) -> bool:
-    """Whether ``fn`` takes a keyword ``name`` (or ``**kwargs``)."""
+    """Whether ``fn`` has a parameter ``name`` (its ``**options`` are checked against its
+    ``*_DEFAULTS``, which :class:`OptionSpec` knows, so they do not count)."""
     import inspect
 
     try:
         params = inspect.signature(fn).parameters
     except (TypeError, ValueError):
         return True
-    return name in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
+    return name in params and params[name].kind is not inspect.Parameter.VAR_KEYWORD
 
 
 def _kw(task: Any, *keys: str) -> dict[str, Any]:
@@ -345,14 +346,14 @@ def track_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     return _generic(fn(mech, np.asarray(path, dtype=float), guess, **dict(task.options)))
 
 
-@register("jacobians", OptionSpec("jacobians", explicit=("q",)))
+@register("jacobians", OptionSpec("jacobians", "analysis.velocity.JACOBIANS_DEFAULTS"))
 def jacobians_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.jacobians(mech, q, **options)`` at ``q`` (or solved from ``qa``)."""
     fn = library_function("jacobians", "jacobians")
     return _generic(fn(mech, _q_of(mech, task, ctx), **dict(task.options)))
 
 
-@register("dof", OptionSpec("dof"))
+@register("dof", OptionSpec("dof", "analysis.mobility.DOF_DEFAULTS"))
 def dof_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.dof(mech[, q], **options)``."""
     fn = library_function("dof", "dof")
@@ -372,8 +373,9 @@ def classify_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     return _generic(fn(mech, _q_of(mech, task, ctx), **dict(task.options)))
 
 
-@register("singular_curves", OptionSpec("singular_curves", explicit=(
-    "plane", "kind", "fixed", "limits", "grid", "bounds")))
+@register("singular_curves", OptionSpec(
+    "singular_curves", "analysis.continuation.SINGULAR_CURVES_DEFAULTS",
+    ("limits", "grid", "bounds")))
 def singular_curves_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.singular_curves(mech, plane=..., kind=curves, fixed=..., ...)`` (+ a PNG)."""
     fn = library_function("singular_curves", "singular_curves")
@@ -401,7 +403,8 @@ def working_modes_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]
     return _generic(fn(mech, **kw, **dict(task.options)))
 
 
-@register("aspects", OptionSpec("aspects", explicit=("fixed", "limits", "grid", "bounds")))
+@register("aspects", OptionSpec("aspects", "analysis.aspects.ASPECTS_DEFAULTS",
+                                ("limits", "grid", "bounds")))
 def aspects_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.aspects(mech, fixed=..., limits=..., grid=..., bounds=..., **options)``."""
     fn = library_function("aspects", "aspects")
@@ -409,7 +412,8 @@ def aspects_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     return _with_picture(_generic(res), res, ctx)
 
 
-@register("workspace", OptionSpec("workspace", explicit=("fixed", "limits", "grid", "bounds")))
+@register("workspace", OptionSpec("workspace", "analysis.aspects.ASPECTS_DEFAULTS",
+                                  ("limits", "grid", "bounds")))
 def workspace_task(mech: Any, task: Any, ctx: TaskContext) -> dict[str, Any]:
     """``optkin.workspace(mech, fixed=..., limits=..., grid=..., bounds=..., **options)``."""
     fn = library_function("workspace", "workspace")
