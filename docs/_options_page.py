@@ -21,13 +21,13 @@ TABLES = [
     ("optkin.analysis.velocity", "JACOBIANS_DEFAULTS", "optkin.jacobians"),
     ("optkin.analysis.mobility", "DOF_DEFAULTS", "optkin.dof"),
     ("optkin.analysis.singularity", "CLASSIFY_DEFAULTS", "optkin.classify"),
+    ("optkin.analysis.continuation", "SINGULAR_CURVES_DEFAULTS", "optkin.singular_curves"),
     ("optkin.analysis.surfaces", "SINGULAR_SURFACES_DEFAULTS", "optkin.singular_surfaces"),
     ("optkin.analysis.cusps", "CUSP_CURVES_DEFAULTS", "optkin.cusp_curves"),
     ("optkin.analysis.cusps", "IS_CUSPIDAL_DEFAULTS", "optkin.is_cuspidal"),
     ("optkin.analysis.cusps", "MODE_CHANGE_DEFAULTS", "optkin.mode_change_path"),
-    ("optkin.analysis.aspects3d", "ASPECTS3D_DEFAULTS", "optkin.aspects3d"),
-    ("optkin.analysis.continuation", "SINGULAR_CURVES_DEFAULTS", "optkin.singular_curves"),
     ("optkin.analysis.aspects", "ASPECTS_DEFAULTS", "optkin.aspects, optkin.workspace"),
+    ("optkin.analysis.aspects3d", "ASPECTS3D_DEFAULTS", "optkin.aspects3d"),
     ("optkin.statics.core", "STATICS_DEFAULTS", "the functions of optkin.statics"),
 ]
 

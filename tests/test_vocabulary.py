@@ -308,6 +308,54 @@ def test_seed_is_accepted_by_keyword_everywhere():
                           seed=3, starts=8).seed == 3
 
 
+#: Public functions of the top-level namespace that take a mechanism and no tuning options,
+#: with why: their keyword arguments say what is asked, not how to compute it
+NO_OPTIONS = {
+    "get_model": "the mechanism only",
+    "working_modes": "the pose only",
+    "certify": "the results to certify only",
+    "singularity_map": "the grid and the section (axes, fixed, working_mode, guess)",
+    "plot_singularity_map": "a picture: the map's arguments and the drawing's (ax, path, ...)",
+}
+
+
+def test_one_option_convention():
+    """Every solver and analysis of the top-level namespace is ``f(mech, <what is asked>,
+    **options)``: its tuning knobs are options over a documented ``*_DEFAULTS`` (on the
+    options page), none of them positional, and an unknown name is an error naming it
+    before any work."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("_options_page",
+                                                  ROOT.parent / "docs" / "_options_page.py")
+    page = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(page)
+    configured = {f.strip().removeprefix("optkin.") for *_, fns in page.TABLES
+                  for f in fns.split(",")}
+    m = M.five_bar(2.0, 1.5, 2.0, 2.0, 1.5)
+    for name in optkin.__all__:
+        f = getattr(optkin, name)
+        if not inspect.isfunction(f) or name in NO_OPTIONS:
+            continue
+        params = list(inspect.signature(f).parameters.values())
+        assert params[0].name == "mech", name
+        assert params[-1].kind is params[-1].VAR_KEYWORD, f"{name} takes no **options"
+        assert name in configured, f"{name}'s options are not on the options page"
+        # every option is a keyword: a call with one more positional argument than the
+        # configuration takes is a TypeError
+        n_pos = sum(p.kind is p.POSITIONAL_OR_KEYWORD for p in params)
+        with pytest.raises(TypeError):
+            f(*([m] + [None] * n_pos))
+        with pytest.raises(optkin.MechanismError, match=rf"{name}: unknown option 'bogus'"):
+            required = [None] * sum(p.default is p.empty and p.kind is p.POSITIONAL_OR_KEYWORD
+                                    for p in params[1:])
+            f(m, *required, bogus=1)
+    for name in NO_OPTIONS:
+        assert not any(p.kind is p.VAR_KEYWORD
+                       for p in inspect.signature(getattr(optkin, name)).parameters.values()
+                       ) or name == "plot_singularity_map", name
+
+
 def test_unknown_options_name_the_allowed_ones():
     m = M.four_bar(1.0, 2.0, 2.0, 2.5)
     with pytest.raises(optkin.MechanismError,
