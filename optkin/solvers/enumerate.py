@@ -161,8 +161,9 @@ ASSEMBLY_DEFAULTS: dict[str, Any] = {
     "jit": "auto",  # compile the step to C: True (wait for the compiler), False, "cached" (if
     # in the disk cache), "auto" ("cached" under 6 unknowns, else compiled in the background
     # while the first calls use the interpreted step)
-    "threads": 1,  # threads of the mapped step (more repeat the geometry in every column:
-    # slower than one on the 2-core machine measured; batch runs parallelize by worker)
+    "threads": 1,  # threads sharing the pool's columns (6+ unknowns; 1: batch runs
+    # parallelize by worker process; 2 measured 0.99-1.14x the speed of 1 on a 6-6 platform
+    # here, the Newton step being a quarter of the time)
 }
 
 #: Options of :func:`track` and their defaults.
@@ -355,13 +356,35 @@ def _no_compiler_warning() -> None:
 _CACHED_WIDTH = 1024
 
 
-def _mapped(model: Model, f: ca.Function, width: int, threads: int) -> tuple[ca.Function, bool]:
-    """``f`` (q_a, x, p) mapped over ``width`` columns, and whether q_a and p are single
-    columns (a serial map) or repeated for every column (a map over threads: CasADi's
-    threaded map of a Function with unmapped inputs costs ten times the work here)."""
-    if threads > 1:
-        return f.map(int(width), "thread", int(threads)), False
-    return f.map(f"{f.name()}_{int(width)}", "serial", int(width), [0, 2], []), True
+def _mapped(model: Model, f: ca.Function, width: int, part: int = 0) -> tuple[ca.Function, bool]:
+    """``f`` (q_a, x, p) mapped serially over ``width`` columns, q_a and p single columns
+    (CasADi's threaded map repeats them for every column: measured 12 % slower with 2
+    threads than with 1 on a 6-6 platform here; threads split the columns instead,
+    :class:`_ThreadedStep`, each share through a map of its own: ``part``)."""
+    return f.map(f"{f.name()}_{int(width)}_{int(part)}", "serial", int(width), [0, 2],
+                 []), True
+
+
+class _ThreadedStep:
+    """A step over ``width`` columns as ``len(parts)`` steps over a share of the columns
+    each, evaluated at once: the first share in the calling thread, the others in a pool
+    of threads kept with the step (CasADi's evaluation releases the GIL); the geometry
+    held once per share."""
+
+    def __init__(self, parts: list[Any]) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.parts = parts
+        self.cuts = np.cumsum([0] + [p.width for p in parts])
+        self.pool = ThreadPoolExecutor(len(parts) - 1, thread_name_prefix="optkin-step")
+
+    def __call__(self, qa: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        c = self.cuts
+        futs = [self.pool.submit(p, qa, X[:, c[i]:c[i + 1]])
+                for i, p in enumerate(self.parts) if i]
+        out = [self.parts[0](qa, X[:, :c[1]])] + [f.result() for f in futs]
+        return (np.concatenate([o[0] for o in out], axis=1),
+                np.concatenate([o[1] for o in out]))
 
 
 class _FusedStep:
@@ -479,16 +502,24 @@ def _mapped_step(model: Model, width: int, step_max: float, k: int, jit: bool | 
     t0 = time.perf_counter()
     split = model.nx > FUSED_MAX
     f, compiled = _step_function(model, split, step_max, k, jit)
-    if width <= _CACHED_WIDTH:
-        fm, single = model.cached(("enumeration:map", split, float(step_max), int(k),
-                                   compiled, int(width), int(threads)),
-                                  lambda: _mapped(model, f, width, threads))
-    else:  # a wide map holds the geometry for every column: not kept
-        fm, single = _mapped(model, f, width, threads)
-    if split:
-        step: Any = _SplitStep(fm, single, model, width, step_max)
+
+    def one(w: int, part: int = 0) -> Any:
+        if w <= _CACHED_WIDTH:
+            fm, single = model.cached(("enumeration:map", split, float(step_max), int(k),
+                                       compiled, int(w), part),
+                                      lambda: _mapped(model, f, w, part))
+        else:  # a wide map: not kept
+            fm, single = _mapped(model, f, w, part)
+        if split:
+            return _SplitStep(fm, single, model, w, step_max)
+        return _FusedStep(fm, single, model, w)
+
+    threads = max(1, min(int(threads), width))
+    if threads > 1:  # the columns in shares as equal as can be
+        shares = [width // threads + (i < width % threads) for i in range(threads)]
+        step: Any = _ThreadedStep([one(w, i) for i, w in enumerate(shares)])
     else:
-        step = _FusedStep(fm, single, model, width)
+        step = one(width)
     return step, time.perf_counter() - t0, compiled, (1 if split else k)
 
 
