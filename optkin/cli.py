@@ -8,6 +8,7 @@ print a one-line message per problem, never a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -37,6 +38,39 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _jobs(text: str) -> int | str:
+    """``--jobs``: a positive integer or ``auto``."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return _positive_int(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected a positive integer or 'auto', got {text!r}") from None
+
+
+#: Memory a worker process is allowed for in ``--jobs auto`` (measured peak of the bundled
+#: problems here: 437 MiB with one worker, 690 MiB with two, parent included)
+WORKER_MEMORY = 512 * 2**20
+
+
+def auto_jobs(paths: Sequence[str]) -> int:
+    """``--jobs auto``: one worker per CPU this process may use, no more than the problem
+    files nor than the physical memory holds at :data:`WORKER_MEMORY` each. Measured on the
+    2-core machine: the bundled problems 1.6-1.7x faster with 2 workers than with 1 (50-56 s
+    against 29-34 s, pictures drawn), the same results."""
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not Linux
+        cpus = os.cpu_count() or 1
+    try:
+        mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, OSError, ValueError):
+        mem = 0
+    by_mem = max(1, mem // WORKER_MEMORY) if mem > 0 else cpus
+    return max(1, min(cpus, by_mem, _count_toml(paths, cpus)))
+
+
 def _positive_seconds(text: str) -> float:
     from optkin.problems.workers import MAX_TIME_LIMIT
 
@@ -64,8 +98,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("paths", nargs="+", metavar="PATH", help="problem files or directories")
     r.add_argument("--out", default="results", metavar="DIR",
                    help="where results go (default: results/)")
-    r.add_argument("--jobs", "-j", type=_positive_int, default=1, metavar="N",
-                   help="problems run in N parallel processes (default 1)")
+    r.add_argument("--jobs", "-j", type=_jobs, default="auto", metavar="N",
+                   help="problems run in N parallel processes (default auto: one per CPU, "
+                        "at most one per problem file and per 512 MiB of memory)")
     r.add_argument("--force", action="store_true",
                    help="rerun problems whose results are complete and unchanged")
     r.add_argument("--scheduler", metavar="ADDRESS",
@@ -127,6 +162,8 @@ def _count_toml(paths: Sequence[str], most: int) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    if args.jobs == "auto":
+        args.jobs = 1 if args.scheduler else auto_jobs(args.paths)
     if args.scheduler:  # connect (and have the Dask workers start theirs) meanwhile
         from optkin.problems.dask_client import preconnect
 

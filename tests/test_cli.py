@@ -209,7 +209,8 @@ def test_invalid_file_in_a_run_gives_exit_2_and_others_still_run(small: Path, tm
 @pytest.mark.parametrize("argv,needle", [
     (["run", "does/not/exist"], "does/not/exist: (file): no such file or directory"),
     (["validate", "nowhere.toml"], "nowhere.toml: (file): no such file or directory"),
-    (["run", "--jobs", "0", "problems"], "expected a positive integer, got 0"),
+    (["run", "--jobs", "0", "problems"], "expected a positive integer or 'auto', got '0'"),
+    (["run", "--jobs", "all", "problems"], "expected a positive integer or 'auto', got 'all'"),
     (["frobnicate"], "invalid choice"),
     (["show", "nowhere.toml"], "nowhere.toml: (file): cannot read"),
 ])
@@ -302,6 +303,25 @@ def test_sigkill_mid_run_leaves_complete_files_and_rerun_finishes(tmp_path: Path
 # ---------------------------------------------------------------------------
 # scale out: process pool and Dask
 # ---------------------------------------------------------------------------
+
+
+def test_jobs_auto_is_the_default_and_counts_cpus_files_and_memory(tmp_path, monkeypatch):
+    """``--jobs auto`` (the default): one worker per usable CPU, at most one per problem
+    file and per WORKER_MEMORY of physical memory."""
+    import optkin.cli as cli
+
+    args = cli.build_parser().parse_args(["run", "problems/"])
+    assert args.jobs == "auto"
+    for i in range(5):
+        (tmp_path / f"p{i}.toml").write_text("")
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 3}, raising=False)
+    page = 4096
+    pages = {"SC_PAGE_SIZE": page, "SC_PHYS_PAGES": 64 * 2**30 // page}
+    monkeypatch.setattr(os, "sysconf", lambda k: pages[k])
+    assert cli.auto_jobs([str(tmp_path)]) == 4  # the CPUs
+    assert cli.auto_jobs([str(tmp_path / "p0.toml"), str(tmp_path / "p1.toml")]) == 2  # files
+    pages["SC_PHYS_PAGES"] = int(1.5 * cli.WORKER_MEMORY) // page
+    assert cli.auto_jobs([str(tmp_path)]) == 1  # memory for one worker only
 
 
 def test_jobs_2_gives_the_same_results_as_jobs_1(small: Path, tmp_path: Path) -> None:
