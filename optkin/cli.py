@@ -109,7 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="wall-time limit of each task without its own time_limit "
                         "(default 600); a task past it is abandoned and reported as an error")
     r.add_argument("--no-pictures", action="store_true", help="do not draw PNG pictures")
-    r.add_argument("--quiet", "-q", action="store_true", help="print only failures")
+    r.add_argument("--quiet", "-q", action="store_true", help="no progress bar: print only failures and the summary line")
 
     v = sub.add_parser("validate", help="check problem files without solving")
     v.add_argument("paths", nargs="+", metavar="PATH", help="problem files or directories")
@@ -207,15 +207,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
         state = "MISSED EXPECTED" if t.get("status") == "ok" else str(t.get("status", "")).upper()
         print(f"{name}: {label}: {state}: {t.get('message', '')}")
     elapsed = time.perf_counter() - t0
-    if not args.quiet or report.exit_code:
-        parts = [f"{len(report.ran)} run", f"{len(report.skipped)} skipped (unchanged)"]
-        if report.invalid:
-            parts.append(f"{len(report.invalid)} invalid")
-        if report.crashed:
-            parts.append(f"{len(report.crashed)} crashed")
-        print(f"optkin: {len(report.ran) + len(report.skipped) + len(report.invalid) + len(report.crashed)}"
-              f" problem(s): {', '.join(parts)}; {n_pass}/{n_tasks} task(s) passed; "
-              f"{elapsed:.1f} s; results in {args.out}/")
+    # the summary line, also with --quiet
+    parts = [f"{len(report.ran)} run", f"{len(report.skipped)} skipped (unchanged)"]
+    if report.invalid:
+        parts.append(f"{len(report.invalid)} invalid")
+    if report.crashed:
+        parts.append(f"{len(report.crashed)} crashed")
+    print(f"optkin: {len(report.ran) + len(report.skipped) + len(report.invalid) + len(report.crashed)}"
+          f" problem(s): {', '.join(parts)}; {n_pass}/{n_tasks} task(s) passed; "
+          f"{elapsed:.1f} s; results in {args.out}/")
     return report.exit_code
 
 

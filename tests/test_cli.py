@@ -244,6 +244,27 @@ def test_python_m_optkin_and_quiet_progress_when_not_a_tty(small: Path, tmp_path
     assert "%|" not in r.stderr and "problem/s" not in r.stderr  # no tqdm bar in a pipe
 
 
+def test_quiet_run_prints_the_summary_line_only_and_failures_with_their_reason(tmp_path):
+    """``-q``: no progress bar, no third-party banner (HiGHS, IPOPT) on stdout or stderr, the
+    summary line alone when every task passes; a failed task is printed with the reason
+    Python gives (an unreachable pose names the leg)."""
+    statics = [str(PROBLEMS / f"statics_{n}.toml") for n in ("rpr3", "rpr4", "rpr3_mr")]
+    r = optkin("run", *statics, "--out", str(tmp_path / "s"), "-q")
+    assert r.returncode == 0, r.stdout + r.stderr
+    lines = r.stdout.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("optkin: 3 problem(s): 3 run"), r.stdout
+    assert "3 problem(s)" in lines[0] and r.stderr == "", r.stderr
+    bad = tmp_path / "unreachable.toml"
+    bad.write_text('schema_version = 1\n[mechanism]\ntype = "library"\nname = "five_bar"\n'
+                   'args = { L0 = 1.0, L1 = 1.0, L2 = 1.0, L3 = 1.0, L4 = 1.0 }\n'
+                   '[[task]]\nkind = "inverse"\npose = [10.0, 10.0]\n')
+    r = optkin("run", str(bad), "--out", str(tmp_path / "u"), "-q")
+    assert r.returncode == 1
+    assert r.stdout.splitlines()[0] == ("unreachable.toml: task[0] (inverse): FAILED: leg 1 "
+                                        "(RRR) cannot reach this pose"), r.stdout
+    assert r.stdout.splitlines()[1].startswith("optkin: 1 problem(s)")
+
+
 def test_show_draws_a_png(tmp_path: Path) -> None:
     png = tmp_path / "five.png"
     assert main(["show", str(PROBLEMS / "five_bar.toml"), "--out", str(png)]) == 0
