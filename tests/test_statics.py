@@ -670,3 +670,22 @@ def test_workspace_marks_singular_poses():
     for pose, mu in zip(ws.poses, ws.margin):
         one = statics.feasible(m, sol_at(m, pose), forces, 1.0)
         np.testing.assert_allclose(mu, one.margin, atol=1e-7)
+
+
+def test_no_solver_banner_in_library_use():
+    """HiGHS prints a copyright banner on stdout at its first instance in a process; a
+    statics call from Python prints nothing (a notebook cell shows only what it asked)."""
+    import subprocess
+    import sys
+
+    code = ("import optkin\n"
+            "from optkin import statics\n"
+            "m = optkin.mechanisms.rpr3([[0, 0], [4, 0], [0, 3]], [[-0.5, -0.3], [0.5, -0.3],"
+            " [0, 0.4]])\n"
+            "r = optkin.inverse(m, [1.6, 1.2, 0.3])[0]\n"
+            "cap = statics.capability(m, r, 1.0, ['fx', '-fx'])\n"
+            "assert cap.success and cap.stats.solver == 'HIGHS'\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout == "" and "HiGHS" not in p.stderr, p.stdout + p.stderr

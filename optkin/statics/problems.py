@@ -12,6 +12,8 @@ process.
 
 from __future__ import annotations
 
+import os
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -250,6 +252,38 @@ def distribution_problem(r: int, m: int, na: int, np_: int, norm: str, limited: 
     return _cached(("distribution", r, m, na, np_, norm, limited), build, reuse)
 
 
+_BANNER = {"done": False}
+_BANNER_LOCK = threading.Lock()
+
+
+def _quiet_highs() -> None:
+    """Create the process's first HiGHS instance with stdout (file descriptor 1) sent to
+    /dev/null: HiGHS prints its copyright banner there once per process, whatever its
+    options (``output_flag=False`` does not stop it), into a notebook, a pipe or the
+    runner's progress bar."""
+    with _BANNER_LOCK:
+        if _BANNER["done"]:
+            return
+        _BANNER["done"] = True
+        try:
+            import highspy
+        except ImportError:
+            return
+        try:
+            sys.stdout.flush()
+            saved = os.dup(1)
+        except (OSError, ValueError, AttributeError):
+            return
+        null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(null, 1)
+            highspy.Highs()
+        finally:
+            os.dup2(saved, 1)
+            os.close(saved)
+            os.close(null)
+
+
 def solve(p: CvxProblem, values: dict[str, np.ndarray], solver: str | None = None,
           solver_options: dict[str, Any] | None = None
           ) -> tuple[str, str, SolverStats, dict[str, np.ndarray | None]]:
@@ -258,6 +292,8 @@ def solve(p: CvxProblem, values: dict[str, np.ndarray], solver: str | None = Non
     Solver failures become the status ``"error"`` (never an exception).
     """
     name = solver or p.solver
+    if str(name).upper() == "HIGHS" and not _BANNER["done"]:
+        _quiet_highs()
     with p.lock:
         t0 = time.perf_counter()
         raw = None
