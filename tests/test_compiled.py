@@ -539,3 +539,32 @@ def test_memo_function_reads_back_only_what_it_wrote(tmp_path, monkeypatch):
     path.chmod(0o666)
     cc.memo_function("test", ["parts", b"more"], build)
     assert len(calls) == 4  # not private: not read
+
+
+def test_geometries_of_a_topology_share_buffers_without_mixing_them():
+    """Models of one topology share each evaluator's buffers in a thread (a new geometry
+    sets none up); calls that alternate between geometries each see their own, checked
+    against the CasADi call with the geometry passed explicitly (Model.residual), and a
+    thread of its own gets buffers of its own."""
+    import threading
+
+    import optkin
+    from optkin.model.compiled import BoundFast
+
+    rng = np.random.default_rng(5)
+    models = [optkin.get_model(optkin.mechanisms.rpr3(rng.uniform(-10, 10, (3, 2)),
+                                                      rng.uniform(-4, 4, (3, 2))))
+              for _ in range(3)]
+    assert len({m.topology.key for m in models}) == 1
+    evs = [m.fast("Phi") for m in models]
+    assert all(isinstance(e, BoundFast) for e in evs)
+    assert len({id(e.ev) for e in evs}) == 1  # one buffer set for the three geometries
+    qa, x = np.array([7.0, 6.5, 6.0]), np.array([1.0, 2.0, 0.3])
+    for k in [0, 1, 2, 1, 0, 0, 2]:
+        np.testing.assert_allclose(evs[k](qa, x)[0].copy(), models[k].residual(qa, x),
+                                   rtol=0, atol=1e-12)
+    other = []
+    t = threading.Thread(target=lambda: other.append(models[0].fast("Phi")))
+    t.start()
+    t.join()
+    assert other[0].ev is not evs[0].ev

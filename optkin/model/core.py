@@ -48,6 +48,9 @@ MAX_MODELS = 512
 
 _STRUCTURES: KeyedCache[Structure] = KeyedCache()
 _TOPOLOGIES: KeyedCache[Topology] = KeyedCache()
+#: Per thread: (topology key, evaluator name, compiled generation) -> its FastFn, shared
+#: by the geometries of the topology (:meth:`Model.fast`)
+_SHARED_FAST = threading.local()
 _MODELS: OrderedDict[str, Model] = OrderedDict()
 _MODELS_LOCK = threading.Lock()
 
@@ -72,6 +75,7 @@ def clear_cache() -> None:
     """Forget every model, topology and everything built per topology."""
     with _MODELS_LOCK:
         _MODELS.clear()
+    _SHARED_FAST.__dict__.clear()  # this thread's shared evaluators
     _TOPOLOGIES.clear()
     _STRUCTURES.clear()
 
@@ -447,10 +451,11 @@ class Model:
     def pose(self, qa: np.ndarray, x: np.ndarray) -> np.ndarray:
         return np.array(self.topology.pose_fn(qa, x, self.p))
 
-    def fast(self, name: str) -> cc.FastFn:
+    def fast(self, name: str) -> cc.BoundFast:
         """A per-thread buffered evaluator of ``newton_step``, ``result``, ``Phi``, ``W``,
         ``pose`` (compiled when available), the geometry filled in; outputs are reused
-        buffers, copy what you keep."""
+        buffers, copy what you keep. The buffers are the topology's, shared in the thread by
+        every geometry (:class:`optkin.model.compiled.BoundFast`)."""
         topo = self.topology
         d = getattr(self._tls, "d", None)
         gen = len(topo.compiled_fns)
@@ -459,11 +464,18 @@ class Model:
             self._tls.gen = gen
         ev = d.get(name)
         if ev is None:
-            f = topo.compiled_fns.get(name)
-            if f is None:
-                f = {"newton_step": topo.step_sx, "Phi": topo.phi, "W": topo.jac,
-                     "pose": topo.pose_fn, "result": topo.result_sx}[name]
-            ev = d[name] = cc.FastFn(f, fixed=(self.p,))
+            shared = getattr(_SHARED_FAST, "d", None)
+            if shared is None:
+                shared = _SHARED_FAST.d = {}
+            key = (topo.key, name, gen)
+            ev_t = shared.get(key)
+            if ev_t is None:
+                f = topo.compiled_fns.get(name)
+                if f is None:
+                    f = {"newton_step": topo.step_sx, "Phi": topo.phi, "W": topo.jac,
+                         "pose": topo.pose_fn, "result": topo.result_sx}[name]
+                ev_t = shared[key] = cc.FastFn(f, fixed=(self.p,))
+            ev = d[name] = cc.BoundFast(ev_t, (self.p,))
         return ev
 
     # -------------------------------------------------------------- conversions
