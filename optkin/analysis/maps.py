@@ -138,14 +138,14 @@ class SingularityMap:
 
 def _measures(jac: Any) -> dict[str, float]:
     """The map's measures at one configuration: classify's margins and the manipulability."""
-    from .singularity import classify
+    from .singularity import classify_jacobians
 
     mech = jac.mech
     model = get_model(mech)
     L = model.length
     act = np.array(mech.actuated)
     qa_scale = np.where(np.array(mech.revolute)[act], 1.0, L)
-    rep = classify(mech, jac.q)
+    rep = classify_jacobians(mech, jac)  # (classify(mech, jac.q) would evaluate them again)
     par, ser = rep.margins["parallel"], rep.margins["serial"]
     rows = task_rows(model)
     J = jac.J_task

@@ -200,7 +200,14 @@ def classify(mech: Mechanism, q: Any, **options: Any) -> SingularityReport:
     opts = merge_options(CLASSIFY_DEFAULTS, options, "classify")
     rtol, tol2 = (check_option(opts, k, "classify", CLASSIFY_DEFAULTS, lo=0.0, lo_open=True)
                   for k in ("rtol", "second_order_tol"))
-    jac = jacobians(mech, q)
+    return classify_jacobians(mech, jacobians(mech, q), rtol, tol2)
+
+
+def classify_jacobians(mech: Mechanism, jac: Jacobians,
+                       rtol: float = CLASSIFY_DEFAULTS["rtol"],
+                       tol2: float = CLASSIFY_DEFAULTS["second_order_tol"]) -> SingularityReport:
+    """:func:`classify` from Jacobians already evaluated at the configuration (for callers
+    that have them: :func:`optkin.singularity_map` evaluates them once a grid point)."""
     if not jac.info.get("defined", True):  # no numeric kernel sees the NaN of an undefined model
         return _undefined_report(jac, rtol, jac.message)
     try:
