@@ -1,6 +1,7 @@
 """A worker running the common analyses imports no scipy.special, scipy.spatial or
 matplotlib (about 0.3-0.4 s each per process), and the small geometric routines written in
-their place agree with those libraries (imported here, in the test)."""
+their place (point in polygon, close pairs, the rotation conversions of spatial poses)
+agree with those libraries (imported here, in the test)."""
 
 import subprocess
 import sys
@@ -48,6 +49,73 @@ def test_close_pairs_agrees_with_a_kd_tree(tol):
     assert got == expect
 
 
+def test_matrix_to_rpy_agrees_with_scipy():
+    """The closed form of matrix_to_rpy against scipy's Rotation (intrinsic ZYX), random
+    rotations and gimbal lock (pitch +-pi/2, where both set roll = 0) included."""
+    import warnings
+
+    from scipy.spatial.transform import Rotation
+
+    from optkin.mechanism.geometry import matrix_to_rpy
+
+    def scipy_rpy(R):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            yaw, pitch, roll = Rotation.from_matrix(R).as_euler("ZYX")
+        return np.array([roll, pitch, yaw])
+
+    def gap(a, b):  # angles equal modulo 2 pi (+pi and -pi are one angle)
+        return float(np.abs((a - b + np.pi) % (2 * np.pi) - np.pi).max())
+
+    rng = np.random.default_rng(5)
+    mats = list(Rotation.random(500, random_state=5).as_matrix())
+    for pitch in (np.pi / 2, -np.pi / 2, np.pi / 2 - 1e-9, -np.pi / 2 + 1e-9):
+        for yaw, roll in rng.uniform(-np.pi, np.pi, (50, 2)):
+            mats.append(Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix())
+    mats += [np.eye(3), np.diag([-1.0, -1.0, 1.0]), np.diag([1.0, -1.0, -1.0])]
+    locked = 0
+    for R in mats:
+        got, want = matrix_to_rpy(R), scipy_rpy(R)
+        assert gap(got, want) < 1e-9, (R, got, want)
+        lock = abs(abs(want[1]) - np.pi / 2) < 1e-7
+        locked += lock
+        # and the angles rebuild the matrix, R = Rz(yaw) Ry(pitch) Rx(roll) (within the
+        # lock band, where roll is set to 0, to the band's width)
+        back = Rotation.from_euler("ZYX", got[::-1]).as_matrix()
+        assert np.abs(back - R).max() < (1e-6 if lock else 1e-12)
+    assert locked >= 200  # the gimbal-lock branch was taken
+
+
+def test_rotation_closed_forms_agree_with_scipy():
+    """rpy_to_matrix, rot_x/y/z and the quaternion conversions against scipy's Rotation:
+    random rotations, half turns (w = 0, each of Shepperd's four branches) and the identity."""
+    from scipy.spatial.transform import Rotation
+
+    from optkin.mechanism import geometry as g
+
+    rng = np.random.default_rng(11)
+    for roll, pitch, yaw in rng.uniform(-4, 4, (300, 3)):
+        want = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+        assert np.abs(g.rpy_to_matrix(roll, pitch, yaw) - want).max() < 1e-14
+        for f, ax in ((g.rot_x, "x"), (g.rot_y, "y"), (g.rot_z, "z")):
+            assert np.abs(f(roll) - Rotation.from_euler(ax, roll).as_matrix()).max() < 1e-14
+    rots = list(Rotation.random(500, random_state=11))
+    rots += [Rotation.from_rotvec(np.pi * np.asarray(a, float) / np.linalg.norm(a))
+             for a in ([1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [0, 1, 1], [1, -2, 3])]
+    rots += [Rotation.identity()]
+    for r in rots:
+        x, y, z, w = r.as_quat()
+        q_scipy = np.array([w, x, y, z])
+        R = r.as_matrix()
+        q = g.matrix_to_quat(R)
+        assert q[0] >= 0 and abs(np.linalg.norm(q) - 1) < 1e-14
+        # a rotation's two quaternions: the one with w >= 0 (either, at w = 0)
+        assert min(np.abs(q - q_scipy).max(), np.abs(q + q_scipy).max()) < 1e-12
+        assert np.abs(g.quat_to_matrix(3.0 * q_scipy) - R).max() < 1e-14  # normalised
+    with pytest.raises(ValueError, match="non-zero finite quaternion"):
+        g.quat_to_matrix([0.0, 0.0, 0.0, 0.0])
+
+
 def test_poisson_upper_rejects_negative_counts():
     with pytest.raises(ValueError, match="k must be >= 0"):
         poisson_upper(-1)
@@ -55,6 +123,7 @@ def test_poisson_upper_rejects_negative_counts():
 
 def test_common_analyses_import_no_heavy_scipy_or_matplotlib():
     code = textwrap.dedent("""
+        import math
         import sys
         from optkin.problems import runner
         probs = {
@@ -66,6 +135,17 @@ def test_common_analyses_import_no_heavy_scipy_or_matplotlib():
                   'args = { L0 = 8.0, L1 = 7.0, L2 = 5.0, L3 = 5.0, L4 = 7.0 }\\n'
                   '[[task]]\\nkind = "aspects"\\n',
         }
+        # a spatial platform (its poses are reported in roll-pitch-yaw angles): hexagons
+        # turned by 30 degrees, every leg sqrt(1.25 - cos 30 deg + 1) long at z = 1
+        ang = [k * 1.0471975511965976 for k in range(6)]
+        base = [[math.cos(t), math.sin(t), 0.0] for t in ang]
+        plat = [[0.5 * math.cos(t + 0.5235987755982988),
+                 0.5 * math.sin(t + 0.5235987755982988), 0.0] for t in ang]
+        leg = math.sqrt(2.25 - math.cos(0.5235987755982988))
+        probs["sg"] = ('[mechanism]\\ntype = "library"\\nname = "stewart_gough"\\n'
+                       f'[mechanism.args]\\nbase = {base}\\nplatform = {plat}\\n'
+                       f'[[task]]\\nkind = "forward"\\nqa = {[leg] * 6}\\n'
+                       'guess = [0.0, 0.0, 0.9, 0.0, 0.0, 0.0]\\n')
         for name, body in probs.items():
             text = f'schema_version = 1\\nname = "{name}"\\n' + body
             out = runner.run_job(name + ".toml", text.encode(), name + ".toml",

@@ -1,5 +1,13 @@
-"""Rotations and poses: scipy.spatial.transform.Rotation behind optkin's conventions
-(quaternions (w, x, y, z), roll-pitch-yaw as R = Rz(yaw) Ry(pitch) Rx(roll))."""
+"""Rotations and poses in optkin's conventions: quaternions (w, x, y, z), roll-pitch-yaw as
+R = Rz(yaw) Ry(pitch) Rx(roll), the conventions of scipy's ``Rotation`` (its
+``from_euler("ZYX", [yaw, pitch, roll])`` and scalar-last quaternions reordered).
+
+The conversions that every spatial problem meets (its guess and its poses are in
+roll-pitch-yaw angles, its unknowns hold a quaternion) are written here in closed form and
+checked against ``Rotation`` in the tests (``tests/test_lean_worker.py``): ``import
+scipy.spatial`` loads its kd-trees, Qhull and scipy.sparse, about 0.3 s in every worker
+process of a batch run. The others call ``Rotation``, imported on first use.
+"""
 
 from __future__ import annotations
 
@@ -22,6 +30,11 @@ def wrap_angle(a):
     return w if w.ndim else float(w)
 
 
+#: |cos pitch| below which :func:`matrix_to_rpy` treats the pitch as +-pi/2 (gimbal lock):
+#: scipy's test, a pitch within 1e-7 of +-pi/2
+_LOCK = float(np.sin(1e-7))
+
+
 def _Rotation() -> Any:
     """scipy's Rotation (imported on first use: ``import optkin`` stays lean)."""
     from scipy.spatial.transform import Rotation
@@ -31,17 +44,20 @@ def _Rotation() -> Any:
 
 def rot_x(a: float) -> np.ndarray:
     """The rotation by ``a`` about x."""
-    return _Rotation().from_euler("x", float(a)).as_matrix()
+    c, s = np.cos(float(a)), np.sin(float(a))
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
 
 
 def rot_y(a: float) -> np.ndarray:
     """The rotation by ``a`` about y."""
-    return _Rotation().from_euler("y", float(a)).as_matrix()
+    c, s = np.cos(float(a)), np.sin(float(a))
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 def rot_z(a: float) -> np.ndarray:
     """The rotation by ``a`` about z."""
-    return _Rotation().from_euler("z", float(a)).as_matrix()
+    c, s = np.cos(float(a)), np.sin(float(a))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def rot2(a: float) -> np.ndarray:
@@ -53,15 +69,32 @@ def rot2(a: float) -> np.ndarray:
 def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """R = Rz(yaw) Ry(pitch) Rx(roll): scipy's ``Rotation.from_euler("ZYX", [yaw, pitch,
     roll])`` (intrinsic z-y'-x'')."""
-    return _Rotation().from_euler("ZYX", [float(yaw), float(pitch), float(roll)]).as_matrix()
+    return rot_z(yaw) @ rot_y(pitch) @ rot_x(roll)
 
 
 def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
     """Inverse of :func:`rpy_to_matrix`: (roll, pitch, yaw), pitch in [-pi/2, pi/2] (at
-    pitch = +-pi/2, where only yaw -+ roll is defined, roll = 0)."""
-    with warnings.catch_warnings():  # the gimbal-lock note: roll = 0 there, as documented
-        warnings.simplefilter("ignore", UserWarning)
-        yaw, pitch, roll = _Rotation().from_matrix(np.asarray(R, dtype=float)).as_euler("ZYX")
+    pitch = +-pi/2, where only yaw -+ roll is defined, roll = 0).
+
+    The angles of scipy's ``Rotation.from_matrix(R).as_euler("ZYX")`` (reversed), gimbal
+    lock included, in closed form (checked against it in the tests): every spatial result
+    is reported in these angles, and ``import scipy.spatial`` (its kd-trees, Qhull and
+    scipy.sparse) costs each worker process of a batch run about 0.3 s.
+    """
+    R = np.asarray(R, dtype=float)
+    if R.shape != (3, 3):
+        raise ValueError(f"matrix_to_rpy: a 3x3 rotation matrix expected, got shape {R.shape}")
+    # R = Rz(yaw) Ry(pitch) Rx(roll): first column (cy cp, sy cp, -sp), last row
+    # (-sp, cp sr, cp cr)
+    cp = float(np.hypot(R[0, 0], R[1, 0]))
+    pitch = float(np.arctan2(-R[2, 0], cp))
+    if cp > _LOCK:
+        roll = float(np.arctan2(R[2, 1], R[2, 2]))
+        yaw = float(np.arctan2(R[1, 0], R[0, 0]))
+    else:  # pitch = +-pi/2: R = Rz(yaw) Ry(pitch) with roll = 0, whose middle column is
+        # (-sin yaw, cos yaw, 0)
+        roll = 0.0
+        yaw = float(np.arctan2(-R[0, 1], R[1, 1]))
     return np.array([roll, pitch, yaw])
 
 
@@ -74,14 +107,40 @@ def euler_xyz(R: np.ndarray) -> np.ndarray:
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation of a quaternion (w, x, y, z); normalised first."""
-    w, x, y, z = np.asarray(q, dtype=float)
-    return _Rotation().from_quat([x, y, z, w]).as_matrix()
+    q = np.asarray(q, dtype=float)
+    n = float(np.linalg.norm(q)) if q.shape == (4,) else 0.0
+    if not n > 0 or not np.isfinite(n):
+        raise ValueError(f"quat_to_matrix: a non-zero finite quaternion (w, x, y, z) "
+                         f"expected, got {q!r}")
+    w, x, y, z = q / n
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 def matrix_to_quat(R: np.ndarray) -> np.ndarray:
-    """Quaternion (w, x, y, z) with w >= 0 of a rotation matrix."""
-    x, y, z, w = _Rotation().from_matrix(np.asarray(R, dtype=float)).as_quat()
-    q = np.array([w, x, y, z])
+    """Quaternion (w, x, y, z) with w >= 0 of a rotation matrix.
+
+    Shepperd's method (the largest of |w|, |x|, |y|, |z| found from the diagonal first,
+    the others from the off-diagonal sums and differences), as scipy's ``from_matrix``;
+    scipy first projects a matrix that is not quite orthogonal onto the rotations, this
+    reads the rotation's own entries (the two agree to the matrix's error)."""
+    R = np.asarray(R, dtype=float)
+    if R.shape != (3, 3):
+        raise ValueError(f"matrix_to_quat: a 3x3 rotation matrix expected, got shape {R.shape}")
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    k = int(np.argmax([R[0, 0], R[1, 1], R[2, 2], tr]))
+    if k == 3:
+        q = np.array([1 + tr, R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    else:
+        i, j, m = k, (k + 1) % 3, (k + 2) % 3
+        q = np.empty(4)
+        q[1 + i] = 1 + 2 * R[i, i] - tr
+        q[1 + j] = R[j, i] + R[i, j]
+        q[1 + m] = R[m, i] + R[i, m]
+        q[0] = R[m, j] - R[j, m]
+    q /= np.linalg.norm(q)
     return q if q[0] >= 0 else -q
 
 
