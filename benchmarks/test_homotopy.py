@@ -147,3 +147,53 @@ def test_homotopy_stewart_first_call(benchmark):
            mechanism="stewart-new-geometry", first_median_s=float(np.median(first)),
            warm_median_s=float(np.median(warm)),
            first_call_over_warm=float(np.median(first) / np.median(warm)))
+
+
+def test_homotopy_stewart_random_30(benchmark):
+    """30 random generic 6-6 platforms (the tests' generator: joints on circles, nearly
+    planar, legs from a random pose), each warm: the homotopy with its default threads
+    (``"auto"``: the usable CPUs, at least 8 paths a thread) and with one thread, beside
+    the multistart (its default, one thread) on the same instances. The benchmark's own
+    figure is the whole batch with the defaults."""
+    from scipy.spatial.transform import Rotation
+
+    from optkin.limits import auto_threads
+
+    rng = np.random.default_rng(12)  # as tests/test_homotopy.py's _random_stewart_platforms
+    inst = []
+    for _ in range(30):
+        ab, ap = np.sort(rng.uniform(0, 2 * np.pi, 6)), np.sort(rng.uniform(0, 2 * np.pi, 6))
+        A = np.c_[np.cos(ab), np.sin(ab), rng.uniform(-0.1, 0.1, 6)]
+        B = 0.5 * np.c_[np.cos(ap), np.sin(ap), rng.uniform(-0.1, 0.1, 6)]
+        p = np.r_[rng.uniform(-0.1, 0.1, 2), rng.uniform(0.8, 1.2)]
+        R = Rotation.from_rotvec(rng.uniform(-0.15, 0.15, 3)).as_matrix()
+        inst.append((optkin.mechanisms.stewart_gough(A, B),
+                     np.linalg.norm(p + B @ R.T - A, axis=1)))
+    for m, L in inst[:2]:
+        optkin.assembly_modes(m, L, method="homotopy")
+    _compiled(inst[0][0])
+    for m, L in inst:  # models built: the figures below are warm
+        optkin.assembly_modes(m, L, method="homotopy")
+
+    def each(**kw):
+        ts = []
+        for m, L in inst:
+            t0 = time.perf_counter()
+            r = optkin.assembly_modes(m, L, **kw)
+            ts.append(time.perf_counter() - t0)
+            assert r.stats.method == kw["method"]
+            assert kw["method"] != "homotopy" or r.complete, r.info["message"]
+        return np.array(ts)
+
+    auto = each(method="homotopy")
+    one = each(method="homotopy", threads=1)
+    multi = each(method="multistart")
+    benchmark.pedantic(lambda: [optkin.assembly_modes(m, L, method="homotopy")
+                                for m, L in inst], rounds=3, iterations=1)
+    record(benchmark, float(np.sum(multi)), "multistart, per instance, summed",
+           mechanism="stewart-random-30", threads_auto=auto_threads(),
+           homotopy_median_s=float(np.median(auto)), homotopy_max_s=float(np.max(auto)),
+           homotopy_1thread_median_s=float(np.median(one)),
+           multistart_median_s=float(np.median(multi)),
+           median_ratio_multistart=float(np.median(multi) / np.median(auto)),
+           median_ratio_multistart_1thread=float(np.median(multi) / np.median(one)))

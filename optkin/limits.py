@@ -56,6 +56,7 @@ __all__ = [
     "check_sizes",
     "largest_size",
     "floor_pow2",
+    "auto_threads",
     "show",
     "Deadline",
 ]
@@ -71,6 +72,21 @@ MAX_ITERATIONS: int = 100_000
 MAX_UNROLL: int = 32
 #: Largest number of threads of a mapped CasADi Function.
 MAX_THREADS: int = 64
+
+
+def auto_threads() -> int:
+    """Threads a call uses when told ``"auto"``: the CPUs this process may run on, or 1
+    where ``OMP_NUM_THREADS`` says 1 (as in the batch runner's workers when several run,
+    and on its Dask workers: they parallelize by process)."""
+    if os.environ.get("OMP_NUM_THREADS", "").strip() == "1":
+        return 1
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        n = os.cpu_count() or 1
+    return max(1, min(n, MAX_THREADS))
+
+
 #: Safety factor applied to every measured cost per unit (allocator slack, temporaries
 #: that differ between platforms and library versions).
 SAFETY: float = 1.5

@@ -79,3 +79,38 @@ def test_forward_batch_with_threads_returns_the_same_rows():
     for x, qa in zip(one.x, QA):
         np.testing.assert_allclose(_legs(b, p, x), qa, atol=1e-9)
     assert isinstance(batch._step_map(optkin.get_model(m), 37, 2), batch._ThreadedEval)
+
+
+def test_homotopy_paths_shared_among_threads_end_where_one_thread_ends():
+    """The homotopy's paths in shares (2, 3 and 5 threads: 20, 14/13/13 and 8 paths) end
+    at the points one thread gives, every path accounted for, and the real modes close
+    the legs (checked with numpy)."""
+    from optkin.solvers.homotopy import PATHS_PER_THREAD, _shares
+
+    m, b, p, rng = _platform(5)
+    Rm = Rotation.from_euler("ZYX", rng.uniform(-0.3, 0.3, 3)).as_matrix()
+    qa = np.linalg.norm(np.array([0.05, 0.1, 0.9]) + p @ Rm.T - b, axis=1)
+    runs = {t: optkin.assembly_modes(m, qa, method="homotopy", threads=t)
+            for t in (1, 2, 3, 5)}
+    one = runs[1]
+    assert one.complete and one.stats.paths == 40 and len(one) >= 2
+    for t, r in runs.items():
+        assert r.complete and r.stats == one.stats, t
+        assert len(r) == len(one), t
+        for x, y in zip(r, one):
+            assert np.max(np.abs(x.x - y.x)) < 1e-12, t
+            assert np.max(np.abs(_legs(b, p, x.x) - qa)) < 1e-9
+    for n, t in ((40, 2), (40, 3), (40, 5), (40, 8), (15, 2), (7, 4), (1, 1)):
+        s = _shares(n, t)
+        assert sum(s) == n and max(s) - min(s) <= 1
+        assert len(s) == 1 or min(s) >= PATHS_PER_THREAD
+
+
+def test_auto_threads_is_one_where_omp_says_one(monkeypatch):
+    from optkin.limits import auto_threads
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    assert auto_threads() == 1
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    import os
+    assert auto_threads() == len(os.sched_getaffinity(0))

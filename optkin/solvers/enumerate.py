@@ -93,6 +93,7 @@ from ..limits import (
     MAX_THREADS,
     SAFETY,
     Deadline,
+    auto_threads,
     check_size,
     check_sizes,
     floor_pow2,
@@ -161,9 +162,11 @@ ASSEMBLY_DEFAULTS: dict[str, Any] = {
     "jit": "auto",  # compile the step to C: True (wait for the compiler), False, "cached" (if
     # in the disk cache), "auto" ("cached" under 6 unknowns, else compiled in the background
     # while the first calls use the interpreted step)
-    "threads": 1,  # threads sharing the pool's columns (6+ unknowns; 1: batch runs
-    # parallelize by worker process; 2 measured 0.99-1.14x the speed of 1 on a 6-6 platform
-    # here, the Newton step being a quarter of the time)
+    "threads": "auto",  # threads sharing the work. The homotopy's paths: "auto" is
+    # optkin.limits.auto_threads() (the usable CPUs, 1 in batch workers when several run),
+    # at least 8 paths a thread (a 6-6 platform's 40 paths 1.65x faster on 2 threads here).
+    # The multistart's pool columns (6+ unknowns): "auto" is 1 (2 measured 0.99-1.14x the
+    # speed of 1 on a 6-6 platform, the Newton step being a quarter of the time)
 }
 
 #: Options of :func:`track` and their defaults.
@@ -630,8 +633,7 @@ def _opt_auto(opts: dict[str, Any], key: str, where: str, conv) -> Any:
 
 #: Options only the multistart reads: giving one selects it under ``method="auto"``.
 _MULTISTART_ONLY = ("starts", "min_starts", "target", "target_upper", "bound", "width",
-                    "max_iter", "step_max", "dedup_tol", "rescue", "jit", "threads",
-                    "continua")
+                    "max_iter", "step_max", "dedup_tol", "rescue", "jit", "continua")
 
 
 def _homotopy_ready(model: Model, given: dict[str, Any]) -> bool:
@@ -715,7 +717,8 @@ def _assembly_options(opts: dict[str, Any], model: Model, given_time: bool = Tru
     else:
         raise MechanismError(f"{w}: option jit must be True, False, 'auto' or 'cached', got "
                              f"{show(j)}")
-    o["threads"] = _opt_int(opts, "threads", w, lo=1, hi=MAX_THREADS)
+    o["threads"] = _opt_auto(opts, "threads", w,
+                             lambda v: _opt_int(opts, "threads", w, lo=1, hi=MAX_THREADS))
     return o
 
 
@@ -954,7 +957,9 @@ def assembly_modes(mech: Mechanism, qa: Any, **options: Any) -> SolutionSet:
         from .homotopy import homotopy_modes
 
         modes = homotopy_modes(mech, qa, seed=int(seed), tol=o["tol"],
-                               time_limit=o["time_limit"], _checked=True)
+                               time_limit=o["time_limit"],
+                               threads=(auto_threads() if o["threads"] == "auto"
+                                        else o["threads"]), _checked=True)
         if o["method"] == "auto" and not (len(modes) and modes.complete
                                           and modes.info["singular_near_real"] == 0
                                           and modes.info["status"] not in LIMIT_REACHED):
@@ -977,7 +982,7 @@ def assembly_modes(mech: Mechanism, qa: Any, **options: Any) -> SolutionSet:
     jit = o["jit"]
     if jit == "auto":
         jit = "cached" if small else "background"
-    threads = 1 if small else min(o["threads"], width)
+    threads = 1 if small or o["threads"] == "auto" else min(o["threads"], width)
     unroll = 3 if small else 2  # Newton iterations per call: fewer Python round trips
     budget = o["starts"]
     min_starts = (256 if small else 2048) if o["min_starts"] == "auto" else o["min_starts"]

@@ -124,14 +124,15 @@ class _LateCompiled:
                     self.f = done[self.f.name()]
                     self._maps = {}
 
-    def mapped(self, N: int, make: Any) -> Any:
-        """The call buffer of ``make(f, N)`` (a map of the current Function over N)."""
+    def mapped(self, N: int, make: Any, part: int = 0) -> Any:
+        """The call buffer of ``make(f, N)`` (a map of the current Function over N); one
+        per ``part``, for calls from several threads at once."""
         from ..model.compiled import FastFn
 
         self.poll()
-        fm = self._maps.get(N)
+        fm = self._maps.get((N, part))
         if fm is None:
-            fm = self._maps[N] = FastFn(make(self.f, N))
+            fm = self._maps[(N, part)] = FastFn(make(self.f, N))
         return fm
 
 
@@ -632,15 +633,62 @@ class _Tracker:
         """Switch to the compiled chunk once its background build has finished."""
         self._chunk.poll()
 
-    def _map(self, N: int):
+    def _map(self, N: int, part: int = 0):
         return self._chunk.mapped(N, lambda f, N: f.map(f"homotopy_chunk_{N}", "serial", N,
-                                                        [1], []))
+                                                        [1], []), part)
+
+    def _call(self, S: np.ndarray, act: np.ndarray, par: np.ndarray, threads: int):
+        """One compiled chunk of the paths ``act`` (rows of ``S`` updated in place); the
+        paths in ``threads`` shares evaluated at once, each through call buffers of its
+        own (the compiled code releases the GIL). Returns the fused condition numbers."""
+        W = self.width
+        # (threads only once the compiled chunk is in: the interpreted one may fail and
+        # wait for it)
+        shares = _shares(act.size, threads if self._pending is None else 1)
+        if len(shares) == 1:
+            fm = self._map(act.size)
+            out, c = fm(S[act].ravel(), par)
+            if self._pending is not None and not fm.ok():  # interpreted, and it failed:
+                self._pending.wait()  # the compiled chunk, from the same state
+                self._poll()
+                if self._pending is None:
+                    fm = self._map(act.size)
+                    out, c = fm(S[act].ravel(), par)
+            S[act] = out.reshape(act.size, W)
+            return np.asarray(c).ravel().copy()
+        cuts = np.cumsum([0] + shares)
+        parts = [act[cuts[k]:cuts[k + 1]] for k in range(len(shares))]
+        fms = [self._map(p.size, k) for k, p in enumerate(parts)]
+
+        def run(k: int):
+            out, c = fms[k](S[parts[k]].ravel(), par)
+            return out.reshape(parts[k].size, W).copy(), np.asarray(c).ravel().copy()
+
+        pool = self._threads(len(parts) - 1)
+        futures = [pool.submit(run, k) for k in range(1, len(parts))]
+        res = [run(0)] + [f.result() for f in futures]
+        for p, (out, _) in zip(parts, res):
+            S[p] = out
+        return np.concatenate([c for _, c in res])
+
+    def _threads(self, n: int):
+        """A pool of ``n`` threads kept with the tracker."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        pool = getattr(self, "_pool", None)
+        if pool is None or pool._max_workers != n:
+            if pool is not None:
+                pool.shutdown(wait=False)
+            pool = self._pool = ThreadPoolExecutor(n, thread_name_prefix="optkin-homotopy")
+        return pool
 
     def run(self, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray, gamma: complex,
-            max_steps: int = 5000, deadline: Any = None, scale: np.ndarray | None = None):
+            max_steps: int = 5000, deadline: Any = None, scale: np.ndarray | None = None,
+            threads: int = 1):
         """(X, status, t, steps, cond) after tracking the rows of X0 from th0 to th1
         (``scale``: of the unknowns, default the system's; cond None unless computed in the
-        compiled call)."""
+        compiled call; ``threads``: the paths shared among that many threads, each share
+        at least :data:`PATHS_PER_THREAD` paths)."""
         N, n = X0.shape
         scale = self.sys.scale if scale is None else np.asarray(scale, dtype=float)
         W = self.width
@@ -663,16 +711,7 @@ class _Tracker:
         steps = 0
         while act.size and steps < max_steps and not (deadline is not None
                                                        and deadline.expired()):
-            fm = self._map(act.size)
-            out, c = fm(S[act].ravel(), par)
-            if self._pending is not None and not fm.ok():  # interpreted, and it failed:
-                self._pending.wait()  # the compiled chunk, from the same state
-                self._poll()
-                if self._pending is None:
-                    fm = self._map(act.size)
-                    out, c = fm(S[act].ravel(), par)
-            S[act] = out.reshape(act.size, W)
-            cond[act] = c
+            cond[act] = self._call(S, act, par, threads)
             steps += CHUNK
             act = act[S[act, 2 * n + _ST] == 0]
         X = S[:, :n] + 1j * S[:, n:2 * n]
@@ -680,6 +719,18 @@ class _Tracker:
         status[status == "running"] = "failed"
         return (X, status, S[:, 2 * n + _T], int(S[:, 2 * n + _CNT].max(initial=0)),
                 cond if self.fused_cond else None)
+
+
+#: Fewest paths a thread is given (below, one call on all of them is faster than the
+#: threads' hand-over).
+PATHS_PER_THREAD = 8
+
+
+def _shares(n: int, threads: int) -> list[int]:
+    """``n`` paths in up to ``threads`` shares as equal as can be, each of at least
+    :data:`PATHS_PER_THREAD` paths."""
+    k = max(1, min(int(threads), n // PATHS_PER_THREAD))
+    return [n // k + (i < n % k) for i in range(k)]
 
 
 def _tracker(model) -> _Tracker | None:
@@ -732,15 +783,16 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
           hmin: float = 1e-12, big: float = 1e8, max_steps: int = 5000,
           accept_tol: float = 1e-6, grow: float = 1.25,
           tracker: _Tracker | None = None, deadline: Any = None,
-          scale: np.ndarray | None = None) -> _Paths:
+          scale: np.ndarray | None = None, threads: int = 1) -> _Paths:
     """Track the solutions X0 (N, n) of H(.; th0) to H(.; th1) along the gamma path
-    (by ``tracker``, compiled, when given: then the step parameters are its own).
-    ``scale``: of the unknowns (the model's ``x_scale``; default the system's)."""
+    (by ``tracker``, compiled, when given: then the step parameters are its own, and
+    ``threads`` share the paths). ``scale``: of the unknowns (the model's ``x_scale``;
+    default the system's)."""
     N, n = X0.shape
     sc = sys.scale if scale is None else np.asarray(scale, dtype=float)
     if tracker is not None:
         X, status, t, steps, cond = tracker.run(X0, th0, th1, gamma, max_steps, deadline,
-                                                sc)
+                                                sc, threads)
         if cond is None:  # polished already: the condition numbers in numpy
             cond = _endpoint_cond(sys, X, status, th1, sc)
         return _Paths(X, status, cond, t, steps)
@@ -1192,7 +1244,7 @@ def _generic_first(model) -> bool:
 
 def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = None,
                    tol: float = 1e-10, time_limit: float | None = None,
-                   _checked: bool = False) -> SolutionSet:
+                   threads: int = 1, _checked: bool = False) -> SolutionSet:
     """Every real assembly mode of ``mech`` at ``qa`` by parameter homotopy (see the
     module docstring). ``start`` defaults to the topology's start system for ``seed``
     (built by monodromy on first use and kept for the process).
@@ -1200,7 +1252,8 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
     ``time_limit`` (s) bounds the tracking; building a start system gets at least 60 s
     or the time budget (:func:`optkin.limits.time_budget`) when smaller. Out of time, the
     result says so (status ``"time_limit"``, ``complete`` False) and a start system
-    cut short is neither stored nor reused."""
+    cut short is neither stored nor reused. ``threads`` share the paths (at least
+    :data:`PATHS_PER_THREAD` each: a 6-6 platform's 40 paths on 2 threads)."""
     from .._checks import check_number
     from ..limits import Deadline, time_budget
     from ..model import get_model
@@ -1259,7 +1312,7 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
             gamma = np.exp(2j * np.pi * GAMMA_SPREAD[min(tries, len(GAMMA_SPREAD)) - 1]
                            * rng.uniform(-1, 1))
             Q = track(sys, start.solutions, start.theta, target, gamma, tracker=tr,
-                      deadline=deadline, scale=sc)
+                      deadline=deadline, scale=sc, threads=threads)
             a = tally(Q)
             if P is None or a[4] < acc[4]:
                 P, acc = Q, a
