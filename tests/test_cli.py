@@ -370,6 +370,42 @@ def test_dask_local_cluster_gives_the_same_results(small: Path, tmp_path: Path) 
     assert_same_results(_results(tmp_path / "serial"), _results(tmp_path / "dask"))
 
 
+def test_dask_tasks_of_several_units_fail_only_the_bad_unit(small: Path, tmp_path: Path,
+                                                            monkeypatch) -> None:
+    """Consecutive cheap units share a Dask task: an invalid problem and a task past its
+    time limit among them fail alone, the others are written as in a serial run."""
+    import distributed
+
+    from optkin.problems import runner
+
+    seen = []
+    batches = runner._dask_batches
+    monkeypatch.setattr(runner, "DASK_TASK_COST", 100.0)  # everything shareable
+    monkeypatch.setattr(runner, "_dask_batches",
+                        lambda jobs, slots: seen.append(b := batches(jobs, 1)) or b)
+    (small / "zz_bad.toml").write_text('schema_version = 1\nname = "bad"\n[mechanism]\n'
+                                       'type = "library"\nname = "no_such_mechanism"\n'
+                                       '[[task]]\nkind = "forward"\nqa = [1.0]\n')
+    (small / "zz_slow.toml").write_text(  # aspects take 0.5 s: the worker is killed
+        'schema_version = 1\nname = "slow"\n[mechanism]\ntype = "library"\n'
+        'name = "five_bar"\nargs = { L0 = 8.0, L1 = 7.0, L2 = 5.0, L3 = 5.0, L4 = 7.0 }\n'
+        '[[task]]\nkind = "aspects"\ntime_limit = 0.02\n'
+        '[[task]]\nkind = "forward"\nqa = [1.0, 2.0]\n')
+    assert main(["run", str(small), "--out", str(tmp_path / "serial"), "--no-pictures"]) == 2
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        code = main(["run", str(small), "--out", str(tmp_path / "dask"), "--no-pictures",
+                     "--scheduler", cluster.scheduler_address])
+    assert code == 2  # the invalid file
+    assert seen and max(len(b) for b in seen[0]) > 1  # units did share a task
+    serial, dask = _results(tmp_path / "serial"), _results(tmp_path / "dask")
+    assert sorted(dask) == sorted(serial) and "zz_bad.json" not in dask
+    slow = dask["zz_slow.json"]["tasks"]
+    assert slow[0]["status"] == "error" and "time limit" in slow[0]["message"]
+    assert slow[1]["status"] == "ok"  # the problem's next task, in a fresh worker
+    assert_same_results(serial, dask)
+
+
 @pytest.mark.slow  # waits for the connection timeout
 def test_dask_unreachable_scheduler_is_a_user_error(small: Path, tmp_path: Path, capsys) -> None:
     code = main(["run", str(small / "rpr3.toml"), "--out", str(tmp_path / "o"),

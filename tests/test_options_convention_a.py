@@ -117,7 +117,7 @@ def test_singular_curves_options_by_keyword():
     assert r.success and np.allclose(r.bounds, [[0.0, 3.0], [0.0, 3.0]])
     with pytest.raises(MechanismError, match=r"^singular_curves: option tol must be"):
         optkin.singular_curves(FIVE, tol=-1.0)
-    with pytest.raises(MechanismError, match=r"^step: expected a number between"):
+    with pytest.raises(MechanismError, match=r"^singular_curves: option step: expected a number between"):
         optkin.singular_curves(FIVE, step=5.0)  # the function's own range check
 
 
@@ -127,7 +127,7 @@ def test_aspects_and_workspace_options_by_keyword():
     assert [a.counts[w] for w in a.working_modes] == [2, 3, 3, 2]
     w = optkin.workspace(FIVE, qa_grid=16)
     assert w.success and w.qa_grid[0].shape == (16,) and round(w.area, 1) == 245.1
-    with pytest.raises(MechanismError, match=r"^qa_grid: expected an integer >= 2, got 1"):
+    with pytest.raises(MechanismError, match=r"^workspace: option qa_grid: expected an integer >= 2, got 1"):
         optkin.workspace(FIVE, qa_grid=1)
     with pytest.raises(MechanismError, match=r"^aspects: option qa_grid must be"):
         optkin.aspects(FIVE, qa_grid="fine")

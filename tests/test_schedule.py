@@ -99,3 +99,27 @@ def test_topology_groups():
     assert topology_group(lib) == "library:rpr3"
     assert topology_group(legs) == "legs::legs3:RPR"
     assert topology_group({"task": []}) == "?"
+
+
+@pytest.mark.parametrize("slots", [1, 2, 16])
+def test_dask_tasks_hold_consecutive_units_within_the_cost_cap(slots):
+    """Every unit in exactly one Dask task, in the runner's order; a task of several units
+    within DASK_TASK_COST and half a thread's share of the whole; the benchmark's shape (a
+    few costly units, many cheap ones) in fewer tasks."""
+    from optkin.problems.runner import DASK_TASK_COST, _dask_batches
+    from optkin.problems.workers import Job
+
+    rng = np.random.default_rng(slots)
+    costs = sorted(np.r_[rng.uniform(0.4, 0.7, 21), rng.uniform(0.03, 0.05, 22),
+                         rng.uniform(0.005, 0.01, 21)], reverse=True)
+    jobs = [Job(f"u{i}", {}, cost=float(c)) for i, c in enumerate(costs)]
+    batches = _dask_batches(jobs, slots)
+    assert [j.key for b in batches for j in b] == [j.key for j in jobs]
+    cap = min(DASK_TASK_COST, sum(costs) / (2 * slots))
+    for b in batches:
+        assert len(b) == 1 or sum(j.cost for j in b) <= cap + 1e-12
+    assert 21 < len(batches) <= 21 + 8  # the costly units alone, the cheap ones shared
+    assert _dask_batches([], slots) == []
+    few = _dask_batches(jobs[-3:], slots)  # three cheap units
+    assert [j.key for b in few for j in b] == [j.key for j in jobs[-3:]]
+    assert len(few) >= 2  # (a task holds at most half a thread's share)

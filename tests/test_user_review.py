@@ -401,12 +401,12 @@ def test_jacobians_tol_is_checked(rpr3, closed):
 
 
 @pytest.mark.parametrize("kw, match", [
-    ({"grid": -1}, r"^grid: expected an integer >= 2"),
-    ({"grid": 2.5}, r"^grid: expected an integer >= 2"),
-    ({"step": 0.0}, r"^step: expected a number > 0"),
+    ({"grid": -1}, r"^singular_curves: option grid: expected an integer >= 2"),
+    ({"grid": 2.5}, r"^singular_curves: option grid: expected an integer >= 2"),
+    ({"step": 0.0}, r"^singular_curves: option step: expected a number > 0"),
     ({"tol": "small"}, r"^singular_curves: option tol must be a number"),  # merge_options
-    ({"tol": 0.0}, r"^tol: expected a number > 0"),
-    ({"max_steps": 0}, r"^max_steps: expected an integer >= 1"),
+    ({"tol": 0.0}, r"^singular_curves: option tol: expected a number > 0"),
+    ({"max_steps": 0}, r"^singular_curves: option max_steps: expected an integer >= 1"),
     ({"bounds": "a"}, r"^bounds: expected \[\[lo, hi\], \[lo, hi\]\]"),
     ({"bounds": [[1, 0], [0, 1]]}, r"^bounds: expected \[\[lo, hi\], \[lo, hi\]\]"),
 ])
@@ -417,7 +417,8 @@ def test_singular_curves_rejects_bad_arguments(kw, match):
 
 @pytest.mark.parametrize("fn", ["aspects", "workspace"])
 @pytest.mark.parametrize("kw, match", [
-    ({"qa_grid": 0}, r"^qa_grid: expected an integer >= 2"),
+    ({"qa_grid": 0}, r"^(aspects|workspace): option qa_grid: expected an integer >= 2"),
+    ({"grid": 1}, r"^(aspects|workspace): option grid: expected an integer >= 2"),
     ({"bounds": [[0, 1]]}, r"^bounds: expected"),
     ({"limits": {"L1.theta1": (1.0, 0.0)}}, r"^limits\['L1.theta1'\]: expected a pair"),
     ({"limits": {"L1.theta1": "wide"}}, r"^limits\['L1.theta1'\]: expected a pair"),

@@ -494,7 +494,7 @@ def aspects(
             kw = {} if step is None else {"step": step}  # grid, qa_grid: planar only
             return aspects3d(mech, limits=limits, bounds=bounds, **kw)  # type: ignore
     fixed, names, chart = _check_plane(mech, fixed)
-    qa_grid = check_number(qa_grid, "qa_grid", integer=True, lo=2)
+    qa_grid = check_number(qa_grid, "aspects: option qa_grid", integer=True, lo=2)
     lim_map = _limit_map(mech, names, limits)
     model = get_model(mech)
     qa_cost = _qa_grid_cost(chart, "aspects", qa_grid)
@@ -678,7 +678,7 @@ def workspace(
     limits, bounds, grid, qa_grid, step = (o["limits"], o["bounds"], o["grid"],
                                            o["qa_grid"], o["step"])
     fixed, names, chart = _check_plane(mech, fixed)
-    qa_grid = check_number(qa_grid, "qa_grid", integer=True, lo=2)
+    qa_grid = check_number(qa_grid, "workspace: option qa_grid", integer=True, lo=2)
     lim_map = _limit_map(mech, names, limits)
     model = get_model(mech)
     qa_cost = _qa_grid_cost(chart, "workspace", qa_grid)

@@ -1210,15 +1210,16 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     t0 = time.perf_counter()
     deadline = Deadline()
     check_mechanism(mech, where)
-    grid = check_number(grid, "grid", integer=True, lo=2, optional=True)
-    step = check_number(step, "step", lo=0.0, lo_open=True, optional=True)
+    grid = check_number(grid, f"{where}: option grid", integer=True, lo=2, optional=True)
+    step = check_number(step, f"{where}: option step", lo=0.0, lo_open=True, optional=True)
     if step is not None and not MIN_STEP <= step <= MAX_STEP:
-        raise MechanismError(f"step: expected a number between {MIN_STEP:g} and {MAX_STEP:g} "
-                             f"(scaled units: lengths / mechanism size, radians), got {step:g}")
-    tol = check_number(tol, "tol", lo=0.0, lo_open=True)
+        raise MechanismError(f"{where}: option step: expected a number between {MIN_STEP:g} "
+                             f"and {MAX_STEP:g} (scaled units: lengths / mechanism size, "
+                             f"radians), got {step:g}")
+    tol = check_number(tol, f"{where}: option tol", lo=0.0, lo_open=True)
     user_steps = max_steps is not None
     if user_steps:
-        max_steps = check_number(max_steps, "max_steps", integer=True, lo=1)
+        max_steps = check_number(max_steps, f"{where}: option max_steps", integer=True, lo=1)
     if isinstance(cusps, (np.bool_, numbers.Integral)) and not isinstance(cusps, bool) \
             and cusps in (0, 1):
         cusps = bool(cusps)

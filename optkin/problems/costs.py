@@ -22,12 +22,12 @@ __all__ = ["task_costs", "topology_group", "Affinity", "BASE_COST", "PROBLEM_COS
            "SETUP_COST"]
 
 #: Seconds per task kind at its default sizes (assembly modes and aspects re-measured on
-#: the scaling benchmark's batch on 2026-12-02: a 3-RPR's homotopy 0.02-0.03 s, a 6-6
-#: platform's 0.15 s, a five-bar's aspects 0.45-0.55 s).
+#: the scaling benchmark's batch on 2026-12-03, one thread, warm: a 3-RPR's homotopy
+#: 3-6 ms, a 6-6 platform's 40 ms, a five-bar's aspects 0.45-0.70 s).
 BASE_COST: dict[str, float] = {
     "forward": 0.01,
     "inverse": 0.03,
-    "assembly_modes": 0.04,  # the parameter homotopy (multistart: 0.15)
+    "assembly_modes": 0.005,  # the parameter homotopy, x size^3 (multistart: x 4)
     "track": 0.005,  # per path point
     "jacobians": 0.02,
     "dof": 0.15,
@@ -39,8 +39,8 @@ BASE_COST: dict[str, float] = {
     "statics": 0.08,
     "design": 6.0,
 }
-#: Seconds to load a problem and fetch its model (per unit of work).
-PROBLEM_COST = 0.05
+#: Seconds to load a problem and fetch its model (per unit of work; measured 3-6 ms warm).
+PROBLEM_COST = 0.005
 
 
 def _num(v: Any, default: float) -> float:
@@ -85,7 +85,7 @@ def task_costs(doc: Any) -> list[float]:
             path = t.get("qa_path")
             c *= len(path) if isinstance(path, list) else 50
         if kind == "assembly_modes":
-            c *= k * k * max(1.0, _num(opts.get("starts"), 2000) / 2000)
+            c *= k ** 3 * max(1.0, _num(opts.get("starts"), 2000) / 2000)
             if t.get("method", opts.get("method")) == "multistart":
                 c *= 4.0
         elif kind in ("aspects", "workspace", "singular_curves"):

@@ -1,8 +1,9 @@
 """What runs on a Dask worker for ``optkin run --scheduler``: the task and a worker plugin.
 
-:func:`run_unit` runs one unit of work (a problem, or some of its tasks) in an optkin
+:func:`run_units` runs units of work (problems, or some of their tasks; consecutive
+cheap units share a Dask task, :func:`optkin.problems.runner._dask_batches`) in an optkin
 worker process of the Dask worker, under the same time limits as the local pool
-(:func:`optkin.problems.workers.run_jobs`); the worker process stays for the next unit,
+(:func:`optkin.problems.workers.run_jobs`); the worker process stays for the next task,
 one per Dask thread. :class:`PrestartWorkers`, registered by the runner when it connects,
 starts those processes as soon as a Dask worker has the plugin, so that their start-up
 (importing optkin, numpy, CasADi and pydantic, about 0.5 s) overlaps the transfer of the
@@ -21,7 +22,7 @@ from distributed.diagnostics.plugin import WorkerPlugin
 
 from optkin.problems.workers import Job, prestart, run_jobs
 
-__all__ = ["PrestartWorkers", "run_unit"]
+__all__ = ["PrestartWorkers", "run_unit", "run_units"]
 
 
 def _threads(worker: Any = None) -> int:
@@ -36,13 +37,22 @@ def _threads(worker: Any = None) -> int:
         return 1
 
 
+def run_units(specs: list[dict[str, Any]], time_limit: float) -> list[dict[str, Any]]:
+    """Dask task: run units one after the other in an optkin worker process of this Dask
+    worker; their outcomes in the order given (each unit under its own time limits: one
+    that overruns or kills its worker process fails alone, the next goes on in a fresh
+    process)."""
+    jobs = [Job(f"{i}:{spec['display']}", spec) for i, spec in enumerate(specs)]
+    got: dict[str, Any] = {}
+    run_jobs(jobs, n_workers=1, time_limit=time_limit, threads=1, keep=_threads(),
+             on_outcome=lambda o: got.__setitem__(o.key, o))
+    return [{"kind": got[j.key].kind, "result": got[j.key].result,
+             "pictures": got[j.key].pictures, "message": got[j.key].message} for j in jobs]
+
+
 def run_unit(spec: dict[str, Any], time_limit: float) -> dict[str, Any]:
     """Dask task: run one unit in an optkin worker process of this Dask worker."""
-    box: dict[str, Any] = {}
-    run_jobs([Job(spec["display"], spec)], n_workers=1, time_limit=time_limit, threads=1,
-             keep=_threads(), on_outcome=lambda o: box.update(outcome=o))
-    o = box["outcome"]
-    return {"kind": o.kind, "result": o.result, "pictures": o.pictures, "message": o.message}
+    return run_units([spec], time_limit)[0]
 
 
 def _quiet_profiler(worker: Any) -> None:
