@@ -21,6 +21,7 @@ from scipy.optimize import brentq
 
 import optkin
 from optkin import MechanismError
+from optkin.mechanism.geometry import rpy_to_matrix
 
 # ---------------------------------------------------------------------------------------------
 # reference: 3-RPR by elimination (Modern Robotics 7.1.1)
@@ -374,7 +375,7 @@ def _planar_platform():
 def test_planar_stewart_mirror_pairs():
     """Planar base and platform: every solution's mirror through the base plane is one."""
     a, b = _planar_platform()
-    R0 = optkin.mechanism.geometry.rpy_to_matrix(0.2, -0.15, 0.4)
+    R0 = rpy_to_matrix(0.2, -0.15, 0.4)
     p0 = np.array([0.1, -0.05, 0.8])
     s = np.linalg.norm(p0 + b @ R0.T - a, axis=1)
     m = optkin.mechanisms.stewart_gough(a, b)
@@ -446,7 +447,7 @@ def test_generic_stewart_against_brute_force():
     rng = np.random.default_rng(4)
     a = rng.uniform(-1, 1, (6, 3))
     b = rng.uniform(-0.6, 0.6, (6, 3))
-    R0 = optkin.mechanism.geometry.rpy_to_matrix(*rng.uniform(-0.5, 0.5, 3))
+    R0 = rpy_to_matrix(*rng.uniform(-0.5, 0.5, 3))
     p0 = np.array([0.1, 0.2, 0.9])
     s = np.linalg.norm(p0 + b @ R0.T - a, axis=1)
     ref = brute_force_stewart(a, b, s, n=8000, seed=1)

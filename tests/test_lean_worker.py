@@ -160,3 +160,20 @@ def test_common_analyses_import_no_heavy_scipy_or_matplotlib():
                          timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1] == "none"
+
+
+def test_subpackages_are_attributes_of_a_fresh_import():
+    """``import optkin`` then ``optkin.solvers``, ``optkin.mechanism`` and the other
+    subpackages as attributes (as scipy's), loaded on first use: a bare import still loads
+    no CasADi."""
+    code = ("import sys, optkin\n"
+            "assert 'casadi' not in sys.modules\n"
+            "from optkin.mechanism.geometry import rpy_to_matrix\n"
+            "assert optkin.mechanism.geometry.rpy_to_matrix is rpy_to_matrix\n"
+            "for n in ('analysis', 'design', 'mechanism', 'model', 'problems', 'solvers'):\n"
+            "    assert getattr(optkin, n).__name__ == 'optkin.' + n\n"
+            "assert callable(optkin.solvers.forward)\n"
+            "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
