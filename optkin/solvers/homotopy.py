@@ -675,11 +675,12 @@ class _Tracker:
         """A pool of ``n`` threads kept with the tracker."""
         from concurrent.futures import ThreadPoolExecutor
 
-        pool = getattr(self, "_pool", None)
-        if pool is None or pool._max_workers != n:
+        pool, size = getattr(self, "_pool", (None, 0))
+        if pool is None or size != n:
             if pool is not None:
                 pool.shutdown(wait=False)
-            pool = self._pool = ThreadPoolExecutor(n, thread_name_prefix="optkin-homotopy")
+            pool = ThreadPoolExecutor(n, thread_name_prefix="optkin-homotopy")
+            self._pool = (pool, n)
         return pool
 
     def run(self, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray, gamma: complex,
