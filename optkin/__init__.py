@@ -19,7 +19,7 @@ __version__ = "0.1.0"
 
 #: public name -> module that defines it (submodules map to themselves)
 _LAZY: dict[str, str] = {
-    # subpackages, reachable as attributes as scipy's are (``optkin.solvers.homotopy``)
+    # subpackages, reachable as attributes as scipy's are (``optkin.mechanism.geometry``)
     **{name: f"optkin.{name}" for name in ("analysis", "design", "mechanism", "model",
                                           "problems", "solvers")},
     "mechanisms": "optkin.mechanisms",

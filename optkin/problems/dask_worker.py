@@ -51,7 +51,8 @@ def run_units(specs: list[dict[str, Any]], time_limit: float) -> list[dict[str, 
 
 
 def run_unit(spec: dict[str, Any], time_limit: float) -> dict[str, Any]:
-    """Dask task: run one unit in an optkin worker process of this Dask worker."""
+    """Dask task: run one unit in an optkin worker process of this Dask worker (the runner
+    submits :func:`run_units`; this stays for clients of earlier versions)."""
     return run_units([spec], time_limit)[0]
 
 
