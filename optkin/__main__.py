@@ -1,8 +1,6 @@
 """``python -m optkin``: the ``optkin`` command."""
 
-import sys
-
-from optkin.cli import main
+from optkin.cli import console
 
 if __name__ == "__main__":
-    sys.exit(main())
+    console()

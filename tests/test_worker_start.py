@@ -100,3 +100,77 @@ def test_dask_preload_hook_starts_one_worker_per_thread(monkeypatch):
     dask_worker.dask_setup(SimpleNamespace(state=SimpleNamespace(nthreads=3)))
     dask_worker.PrestartWorkers().setup(SimpleNamespace(state=SimpleNamespace(nthreads=2)))
     assert calls == [(3, 1), (2, 1)]
+
+
+def _env_buffered() -> dict:
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    return env
+
+
+def test_fast_exit_runs_the_exit_handlers_and_flushes(tmp_path):
+    """fast_exit skips only the interpreter's teardown: the status is kept, buffered output
+    (a pipe: block-buffered) and what the exit handlers write arrive, in order."""
+    flag = tmp_path / "handler_ran"
+    code = ("import atexit, sys\n"
+            "from optkin.problems.workers import fast_exit\n"
+            f"atexit.register(lambda: open({str(flag)!r}, 'w').write('yes'))\n"
+            "atexit.register(lambda: print('from the handler'))\n"
+            "print('before', end=' ')\n"
+            "print('to stderr', file=sys.stderr, end='')\n"
+            "fast_exit(3)\n"
+            "print('never')\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=60, env=_env_buffered())
+    assert r.returncode == 3
+    assert r.stdout == "before from the handler\n" and r.stderr == "to stderr"
+    assert flag.read_text() == "yes"
+
+
+def test_the_console_script_keeps_its_exit_status_and_output(tmp_path):
+    """``python -m optkin`` (the console script's function): argparse's exits, a run with
+    nothing to do, a run that writes results; each with the status and output of
+    :func:`optkin.cli.main`."""
+    env = _env_buffered()
+
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "optkin", *args], capture_output=True,
+                              text=True, timeout=300, env=env, cwd=tmp_path)
+
+    r = run("--version")
+    assert r.returncode == 0 and r.stdout.startswith("optkin ")
+    r = run("run")  # no PATH: a usage error
+    assert r.returncode == 2 and "required: PATH" in r.stderr
+    r = run("run", str(tmp_path / "nothing_here"))
+    assert r.returncode == 2 and "no such file or directory" in r.stderr
+    r = run("run", str(PROBLEMS / "four_bar.toml"), "--out", "res", "--no-pictures", "-q")
+    assert r.returncode == 0, r.stderr
+    assert "1 problem(s): 1 run" in r.stdout
+    assert (tmp_path / "res" / "four_bar.json").is_file()
+    assert (tmp_path / "res" / "summary.csv").read_text().count("\n") >= 2
+
+
+def test_workers_start_without_site_on_the_parents_path(monkeypatch, tmp_path):
+    """Workers start with ``python -S`` and the parent's module path less the working
+    directory (and '' / '.'), so a folder on the parent's path (as PYTHONPATH or a
+    notebook's sys.path.append puts one) is on the worker's too."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", ["", ".", str(tmp_path), "/some/where", *sys.path])
+    path = wk._boot_path()
+    assert "" not in path and "." not in path and str(tmp_path) not in path
+    assert path[0] == "/some/where"
+    made = []
+    popen = subprocess.Popen
+
+    def spy(args, *a, **k):
+        made.append(list(args))
+        return popen(args, *a, **k)
+
+    monkeypatch.setattr(subprocess, "Popen", spy)
+    out = wk.run_jobs([wk.Job("a", _spec("a"))], n_workers=1, threads=5)
+    assert [o.kind for o in out] == ["done"]
+    if made:  # (none when an idle worker of this environment was left by another test)
+        args = made[0]
+        assert args[1] == "-S" and "/some/where" in args
+        assert str(tmp_path) not in args[args.index("-c") + 2:]
