@@ -568,3 +568,27 @@ def test_geometries_of_a_topology_share_buffers_without_mixing_them():
     t.start()
     t.join()
     assert other[0].ev is not evs[0].ev
+
+
+@pytest.mark.parametrize("n", [1, 100, 256, 2048])
+def test_map_shared_is_the_function_column_by_column(n):
+    """map_shared(f, name, n, shared): every column equals f called on that column alone
+    with the shared inputs; the signature (names, shapes) is that of f.map(..., shared)."""
+    from optkin.model.compiled import map_shared
+
+    x, p, q = ca.SX.sym("x", 3), ca.SX.sym("p", 4), ca.SX.sym("q", 2)
+    f = ca.Function("f", [x, p, q], [ca.sin(x) * p[0] + q[1], ca.dot(x, p[1:]) * q[0]],
+                    ["x", "p", "q"], ["y", "z"])
+    g = map_shared(f, f"f_{n}", n, [1])
+    ref = f.map(f"f_{n}", "serial", n, [1], [])
+    assert g.name() == ref.name() and g.name_in() == ref.name_in()
+    assert g.name_out() == ref.name_out()
+    assert [g.sparsity_in(i).shape for i in range(3)] == [ref.sparsity_in(i).shape
+                                                          for i in range(3)]
+    rng = np.random.default_rng(n)
+    X, P, Q = rng.normal(size=(3, n)), rng.normal(size=4), rng.normal(size=(2, n))
+    Y, Z = (np.array(v) for v in g(X, P, Q))
+    for k in range(n):
+        y, z = f(X[:, k], P, Q[:, k])
+        assert np.allclose(Y[:, k], np.array(y).ravel(), atol=1e-14)
+        assert np.allclose(Z[0, k], float(z), atol=1e-14)

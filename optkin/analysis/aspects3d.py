@@ -219,14 +219,14 @@ class _FreeTest:
         """det A (N,) and diag B (N, na) at the rows of V: the system's Function mapped over
         power-of-two blocks through call buffers, the maps built once (by DM calls: 0.3 ms
         a call, a tenth of a 3-RPR's 3-D aspects)."""
-        from ..model.compiled import FastFn
+        from ..model.compiled import FastFn, map_shared
 
         N, nv = V.shape
         n = 1 << max(0, (N - 1).bit_length())
         fm = self._maps.get(n)
         if fm is None:
             f = self.sys.fn.aux
-            fm = self._maps[n] = FastFn(f.map(f"aux_{n}", "serial", n, [1], []),
+            fm = self._maps[n] = FastFn(map_shared(f, f"aux_{n}", n, [1]),
                                         fixed=[self.model.p])
         A = np.empty((n, nv))
         A[:N], A[N:] = V, V[:1]  # padding: a real point, no NaN

@@ -46,7 +46,7 @@ from ..limits import SAFETY, Deadline, check_size, largest_size, memory_budget, 
 from ..mechanism import Mechanism
 from ..model import get_model
 from ..model.charts import PlanarChart, planar_chart
-from ..model.compiled import FastFn
+from ..model.compiled import FastFn, map_shared
 from ..results import INACCURATE, MEMORY_LIMIT, OPTIMAL, TIME_LIMIT, jsonable
 
 __all__ = ["Curve", "SingularCurves", "singular_curves", "SINGULAR_CURVES_DEFAULTS",
@@ -305,7 +305,7 @@ def _in_blocks(fns: Any, f: ca.Function, tag: int, V: np.ndarray, shared: list[i
     n = 1
     while n < min(N, BLOCK):
         n *= 2
-    fm = fns.mapped(tag - n, lambda: f.map(f"{f.name()}_{n}", "serial", n, shared, []))
+    fm = fns.mapped(tag - n, lambda: map_shared(f, f"{f.name()}_{n}", n, shared))
     outs: list[list[np.ndarray]] = [[] for _ in range(f.n_out())]
     for s in range(0, N, n):
         blk = V[:, s:s + n]

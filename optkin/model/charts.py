@@ -52,7 +52,7 @@ def _chunked(model: Any, key: str, X: np.ndarray) -> list[np.ndarray]:
     # FastFn per topology and size (the geometry an input), its calls serialised (its
     # buffers are shared)
     fm, lock = model.cached(("planar_chart", key, n), lambda: (
-        cc.FastFn(f.map(f"{f.name()}_{n}", "serial", n, [1], [])), threading.Lock()))
+        cc.FastFn(cc.map_shared(f, f"{f.name()}_{n}", n, [1])), threading.Lock()))
     p = np.asarray(model.p, dtype=float)
     rows = [f.size1_out(j) for j in range(f.n_out())]
     outs: list[list[np.ndarray]] = [[] for _ in range(f.n_out())]
