@@ -102,3 +102,38 @@ def test_clear_cache_empties_every_cache():
     gc.collect()
     assert ref() is None, "a cache still holds the topology"
     assert get_model(m).topology is not None
+
+
+def test_screw_exp_against_rotations_about_a_point_and_translations():
+    """exp([S] theta) of a revolute screw (w, -w x c) is the turn by theta about the line
+    through c along w (scipy's Rotation, with p = c - R c), of a prismatic one (0, v) the
+    shift theta v; alike for DM, SX (evaluated) and MX arguments, and in a product."""
+    import casadi as ca
+    from scipy.spatial.transform import Rotation
+
+    from optkin.model.joints import chain_transform, screw_exp
+
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        w = rng.normal(size=3)
+        w /= np.linalg.norm(w)
+        c, v, th = rng.normal(size=3), rng.normal(size=3), float(rng.normal())
+        S = np.r_[w, -np.cross(w, c)]
+        R = Rotation.from_rotvec(th * w).as_matrix()
+        want_r = np.eye(4)
+        want_r[:3, :3], want_r[:3, 3] = R, c - R @ c
+        want_p = np.eye(4)
+        want_p[:3, 3] = th * v
+        Sp = np.r_[np.zeros(3), v]
+        s_sym, t_sym = ca.SX.sym("S", 6), ca.SX.sym("t")
+        m_sym, u_sym = ca.MX.sym("S", 6), ca.MX.sym("t")
+        for Sk, kind, want in ((S, "R", want_r), (Sp, "P", want_p)):
+            got_dm = np.array(screw_exp(ca.DM(Sk), th, kind))
+            f_sx = ca.Function("f", [s_sym, t_sym], [screw_exp(s_sym, t_sym, kind)])
+            f_mx = ca.Function("f", [m_sym, u_sym], [screw_exp(m_sym, u_sym, kind)])
+            for got in (got_dm, np.array(f_sx(Sk, th)), np.array(f_mx(Sk, th))):
+                assert np.allclose(got, want, atol=1e-12)
+        both = np.array(chain_transform([ca.DM(S), ca.DM(Sp)], "RP", [th, th]))
+        assert np.allclose(both, want_r @ want_p, atol=1e-12)
+    with pytest.raises(ValueError, match="screw kind"):
+        screw_exp(ca.DM(S), 0.1, "H")
