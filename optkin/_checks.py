@@ -188,7 +188,10 @@ _show = show
 
 def _check_finite(a: np.ndarray, where: str, names: Sequence[str] | None,
                   error: type[Exception], path: Path, max_abs: float = MAX_ABS) -> None:
-    bad = ~np.isfinite(a) | (np.abs(np.nan_to_num(a)) > max_abs)
+    ok = np.abs(a) <= max_abs  # False for NaN, and for inf unless max_abs is inf
+    if not math.isfinite(max_abs):
+        ok &= np.isfinite(a)
+    bad = ~ok
     if bad.any():
         i = int(np.flatnonzero(bad.ravel())[0])
         x = float(a.ravel()[i])

@@ -165,3 +165,26 @@ def test_mechanism_is_immutable_and_picklable():
         m.name = "other"
     m2 = pickle.loads(pickle.dumps(m))
     assert m2.key == m.key and m2.joint_names == m.joint_names
+
+
+@pytest.mark.parametrize("values, max_abs, bad_at", [
+    ([1.0, 2.0], None, None), ([1.0, float("nan")], None, 1), ([float("inf"), 1.0], None, 0),
+    ([1.0, -1e200], None, 1), ([1e200, 1.0], float("inf"), None),
+    ([1.0, float("-inf")], float("inf"), 1), ([float("nan")], float("inf"), 0),
+])
+def test_as_vector_refuses_non_finite_and_too_large_entries(values, max_abs, bad_at):
+    """as_vector's check, against the rule written out: NaN and +-inf are refused always,
+    finite entries beyond max_abs (default MAX_ABS) only when max_abs is finite; the
+    message names the first offending entry."""
+    from optkin._checks import MAX_ABS, as_vector
+
+    kw = {} if max_abs is None else {"max_abs": max_abs}
+    limit = MAX_ABS if max_abs is None else max_abs
+    want = next((i for i, v in enumerate(values)
+                 if not np.isfinite(v) or abs(v) > limit), None)
+    assert want == bad_at
+    if bad_at is None:
+        assert as_vector(values, "qa", **kw).tolist() == values
+    else:
+        with pytest.raises(optkin.MechanismError, match=f"at entry {bad_at}"):
+            as_vector(values, "qa", **kw)

@@ -75,7 +75,10 @@ def revolute_screw(axis: Any, point: Any) -> np.ndarray:
     """
     w = _pad3(np.asarray(axis, dtype=float))
     q = _pad3(np.asarray(point, dtype=float))
-    return np.concatenate([w, -np.cross(w, q)])
+    # q x w written out: numpy's cross of two 3-vectors costs 57 us, which a 6-6
+    # platform's 60 screws paid in every problem a worker loads (3.4 ms)
+    return np.array([w[0], w[1], w[2], q[1] * w[2] - q[2] * w[1],
+                     q[2] * w[0] - q[0] * w[2], q[0] * w[1] - q[1] * w[0]])
 
 
 def prismatic_screw(direction: Any) -> np.ndarray:
