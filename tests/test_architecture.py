@@ -137,3 +137,15 @@ def test_screw_exp_against_rotations_about_a_point_and_translations():
         assert np.allclose(both, want_r @ want_p, atol=1e-12)
     with pytest.raises(ValueError, match="screw kind"):
         screw_exp(ca.DM(S), 0.1, "H")
+
+
+def test_revolute_screw_is_the_axis_and_its_moment():
+    """revolute_screw(w, q) = (w, -w x q) (numpy's cross), 2-D points in the plane z = 0."""
+    from optkin.mechanism.legs import revolute_screw
+
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        w, q = rng.normal(size=3), rng.normal(size=3)
+        assert np.array_equal(revolute_screw(w, q), np.r_[w, -np.cross(w, q)])
+    w, q2 = rng.normal(size=3), rng.normal(size=2)
+    assert np.array_equal(revolute_screw(w, q2), np.r_[w, -np.cross(w, np.r_[q2, 0.0])])
