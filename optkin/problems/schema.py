@@ -17,7 +17,6 @@ Adding a task kind: write a small parameter model deriving from :class:`TaskBase
 with ``kind: Literal["my_kind"]``, and add it to :data:`TASK_MODELS`.
 """
 
-from __future__ import annotations
 
 import ast
 import difflib
@@ -660,7 +659,7 @@ class Expected(Strict):
     source: Str | None = None
 
     @model_validator(mode="after")
-    def _paths(self) -> Expected:
+    def _paths(self) -> "Expected":
         for k in self.values:
             try:
                 parse_value_path(k)
@@ -874,7 +873,7 @@ class StaticsTask(TaskBase):
     draw: Bool = True
 
     @model_validator(mode="after")
-    def _needs(self) -> StaticsTask:
+    def _needs(self) -> "StaticsTask":
         def fail(key: str, msg: str) -> PydanticCustomError:
             return PydanticCustomError("statics", "{__loc__}" + msg, {"__loc__": f"[{key!r}]"})
 
@@ -964,7 +963,7 @@ class DesignTask(TaskBase):
     draw: Bool = True
 
     @model_validator(mode="after")
-    def _needs(self) -> DesignTask:
+    def _needs(self) -> "DesignTask":
         def fail(key: str, msg: str) -> PydanticCustomError:
             return PydanticCustomError("design", "{__loc__}" + msg, {"__loc__": f"[{key!r}]"})
 
