@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from optkin._exit import fast_exit
 from optkin.errors import OptkinError, ProblemFileError
 
 __all__ = ["main", "build_parser"]
@@ -405,15 +406,19 @@ def console() -> None:
     one), about 60 ms here, which every invocation, and every batch run's wall time, paid.
     The exit handlers (idle workers told to exit, a private compiled-code cache removed,
     logging flushed) run first, then the process ends with the command's status."""
-    from optkin.problems.workers import fast_exit
-
     try:
         code = main()
     except SystemExit as e:  # argparse: --help, --version, usage errors
         code = e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
         if e.code is not None and not isinstance(e.code, int):
             _err(str(e.code))
-    fast_exit(code)
+    except KeyboardInterrupt:  # before main's handler took over (still starting)
+        _err("optkin: interrupted")
+        code = 130
+    try:
+        fast_exit(code)
+    except KeyboardInterrupt:  # a Ctrl-C in the last milliseconds: the work is written
+        os._exit(130)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -34,9 +34,12 @@ import weakref
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
-__all__ = ["Job", "JobOutcome", "run_jobs", "prestart", "DEFAULT_TIME_LIMIT", "MAX_TIME_LIMIT"]
+from optkin._exit import fast_exit
+
+__all__ = ["Job", "JobOutcome", "run_jobs", "prestart", "fast_exit", "DEFAULT_TIME_LIMIT",
+           "MAX_TIME_LIMIT"]
 
 #: Seconds a task may run when neither the task (``time_limit``) nor the run
 #: (``--time-limit``) says otherwise. Loading a problem and building its model have the
@@ -126,22 +129,6 @@ def _preload() -> None:
             importlib.import_module(name)
         except Exception:  # noqa: BLE001 - the task that needs it will report it
             pass
-
-
-def fast_exit(code: int = 0) -> NoReturn:
-    """End this process at once with status ``code``, its work done: the exit handlers
-    (``atexit``: a private compiled-code cache removed, idle workers told to exit, logging
-    flushed) run and the standard streams are flushed, then the interpreter's teardown
-    (freeing every module's objects one by one: 50-70 ms with numpy, CasADi and pydantic
-    loaded) is skipped. Threads still running are not waited for (the library builders
-    of the compiled-code cache are processes of their own and finish regardless)."""
-    try:
-        atexit._run_exitfuncs()
-    finally:
-        for stream in (sys.stdout, sys.stderr):
-            with contextlib.suppress(Exception):
-                stream.flush()
-        os._exit(code)
 
 
 def serve(rfd: int, wfd: int, parent: int) -> None:
