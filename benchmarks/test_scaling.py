@@ -150,7 +150,7 @@ def make_trivial(folder: Path, n: int) -> None:
 #: The ``optkin`` command (:func:`optkin.cli.console`: main, then fast_exit), reporting the
 #: CPU time of its own process
 _CLI = ("import sys, time\nfrom optkin.cli import main\n"
-        "from optkin.problems.workers import fast_exit\nrc = main(sys.argv[1:])\n"
+        "from optkin._exit import fast_exit\nrc = main(sys.argv[1:])\n"
         "print(f'parent-cpu {time.process_time():.6f}', file=sys.stderr)\nfast_exit(rc)\n")
 
 

@@ -3,6 +3,7 @@ imports no heavy module, and a worker does not inherit Dask's malloc setting."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -103,10 +104,7 @@ def test_dask_preload_hook_starts_one_worker_per_thread(monkeypatch):
 
 
 def _env_buffered() -> dict:
-    import os
-
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
-    return env
+    return {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
 
 
 def test_fast_exit_runs_the_exit_handlers_and_flushes(tmp_path):
@@ -114,7 +112,7 @@ def test_fast_exit_runs_the_exit_handlers_and_flushes(tmp_path):
     (a pipe: block-buffered) and what the exit handlers write arrive, in order."""
     flag = tmp_path / "handler_ran"
     code = ("import atexit, sys\n"
-            "from optkin.problems.workers import fast_exit\n"
+            "from optkin._exit import fast_exit\n"
             f"atexit.register(lambda: open({str(flag)!r}, 'w').write('yes'))\n"
             "atexit.register(lambda: print('from the handler'))\n"
             "print('before', end=' ')\n"

@@ -67,8 +67,6 @@ def screw_exp(S, theta, kind: str):
     >>> np.round(T @ [1, 1, 0, 1], 12).tolist()   # (1, 1) turns a quarter about (1, 0)
     [0.0, 0.0, 0.0, 1.0]
     """
-    if kind not in ("R", "P"):
-        raise ValueError(f"screw kind {kind!r}: expected 'R' or 'P'")
     if isinstance(S, ca.MX) or isinstance(theta, ca.MX):
         return _screw_exp(S, theta, kind)
     return _exp_function(kind)(S, theta)

@@ -17,7 +17,6 @@ Adding a task kind: write a small parameter model deriving from :class:`TaskBase
 with ``kind: Literal["my_kind"]``, and add it to :data:`TASK_MODELS`.
 """
 
-
 import ast
 import difflib
 import hashlib

@@ -38,8 +38,7 @@ from typing import Any
 
 from optkin._exit import fast_exit
 
-__all__ = ["Job", "JobOutcome", "run_jobs", "prestart", "fast_exit", "DEFAULT_TIME_LIMIT",
-           "MAX_TIME_LIMIT"]
+__all__ = ["Job", "JobOutcome", "run_jobs", "prestart", "DEFAULT_TIME_LIMIT", "MAX_TIME_LIMIT"]
 
 #: Seconds a task may run when neither the task (``time_limit``) nor the run
 #: (``--time-limit``) says otherwise. Loading a problem and building its model have the
