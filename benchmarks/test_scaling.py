@@ -427,7 +427,11 @@ def test_scaling(benchmark, tmp_path):
                  "unit_cost_max": max(costs), "warmup_per_topology": excess,
                  "compile_per_topology": compile_, "per_unit": per_unit,
                  "parent_cpu_per_unit": parent, "parent_cpu_total": parent_total,
-                 "parent_cpu_one_problem": triv_cpu, "cpu_inflation_at_2": inflation})
+                 "parent_cpu_one_problem": triv_cpu, "cpu_inflation_at_2": inflation,
+                 # what the model was fed, to re-run it offline: (problem, topology,
+                 # measured cost less the set-up, estimated cost) in the runner's order
+                 "units_warm": [(u[0], u[1], c, u[3]) for u, c in zip(units["warm"], costs)],
+                 "units_cold": units["cold"]})
     for key, ws in walls.items():
         P, state = int(key.split("_")[0][4:]), key.split("_")[1]
         ratios = [w1 / w for w1, w in zip(walls[f"pool1_{state}"], ws)]  # round by round

@@ -3,6 +3,7 @@ imports no heavy module, and a worker does not inherit Dask's malloc setting."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -59,12 +60,39 @@ def test_workers_do_not_inherit_dasks_malloc_trim(monkeypatch):
     ("optkin.problems.workers", ("numpy", "casadi", "pydantic", "scipy")),
     ("optkin.problems.dask_worker", ("casadi", "pydantic", "scipy")),  # numpy: distributed's
     ("optkin.cli", ("numpy", "casadi", "pydantic", "scipy")),
+    ("optkin.problems.runner", ("numpy", "casadi", "pydantic", "scipy")),
 ])
 def test_worker_machinery_imports_no_heavy_module(module, heavy):
     code = (f"import sys, {module}; print(sorted(m for m in {heavy!r} if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "[]", out
+
+
+def test_a_whole_run_leaves_the_heavy_modules_to_the_workers(tmp_path):
+    """The command line's process reads, schedules and writes two problems (one of them
+    invalid, one split into units on two workers) without importing numpy, CasADi or
+    pydantic: the workers validate and run them."""
+    (tmp_path / "in").mkdir()
+    (tmp_path / "in" / "ok.toml").write_bytes((PROBLEMS / "five_bar.toml").read_bytes())
+    (tmp_path / "in" / "bad.toml").write_text("schema_version = 1\n[mechanism]\n")
+    code = (
+        "import sys, json\n"
+        "from optkin.cli import main\n"
+        f"rc = main(['run', {str(tmp_path / 'in')!r}, '--out', {str(tmp_path / 'out')!r},"
+        " '--no-pictures', '-q', '--jobs', '2'])\n"
+        "heavy = sorted(m for m in ('numpy', 'casadi', 'pydantic', 'scipy') if m in sys.modules)\n"
+        "print(json.dumps([rc, heavy]))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=600)
+    rc, heavy = json.loads(out.stdout.strip().splitlines()[-1])
+    assert heavy == [], heavy
+    assert rc == 2  # the invalid file (status 2: invalid input)
+    res = json.loads((tmp_path / "out" / "ok.json").read_text())
+    assert res["complete"] and len(res["tasks"]) > 1
+    assert all(t["status"] == "ok" for t in res["tasks"]), [t["message"] for t in res["tasks"]]
+    summary = (tmp_path / "out" / "summary.csv").read_text()
+    assert "bad" in summary and "mechanism" in summary
 
 
 def test_a_stopped_idle_worker_is_replaced_within_the_ack_limit(monkeypatch):

@@ -33,22 +33,19 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from optkin.errors import MechanismError, ProblemFileError
-from optkin.problems.schema import (
-    ALL,
-    ANY,
-    Expected,
-    Problem,
-    input_hash,
-    load_problem_bytes,
-    optkin_version,
-    parse_toml,
-    parse_value_path,
-)
-from optkin.problems.tasks import TaskContext, jsonable, run_task
+from optkin.problems.files import MAX_FILE_BYTES, input_hash, optkin_version, parse_toml
 from optkin.problems.workers import DEFAULT_TIME_LIMIT, Job, JobOutcome, run_jobs
+
+if TYPE_CHECKING:
+    from optkin.problems.schema import Expected, Problem
+    from optkin.problems.tasks import TaskContext
+
+# The command line's process (reading files, scheduling, writing results) imports only the
+# standard library: the schema (pydantic), the tasks and numpy load where a problem is
+# loaded or run, in the workers, or in this process for run_problem and run_job.
 
 __all__ = [
     "DEFAULT_TIME_LIMIT",
@@ -279,6 +276,8 @@ def _fmt(v: Any) -> str:
 def _evaluate(node: Any, tokens: list[Any], pos: int, parent: Any, key: Any,
               test: Callable[[Any], bool]) -> tuple[bool, str]:
     """Walk ``tokens`` from ``node``; returns (ok, what was found)."""
+    from optkin.problems.schema import ALL, ANY
+
     if pos == len(tokens):
         return test(node), _fmt(node)
     tok = tokens[pos]
@@ -354,6 +353,8 @@ def check_expected(expected: Expected | None, output: dict[str, Any] | None,
         tol = spec.get("tol") or expected.tol
         rtol = spec.get("rtol") if spec.get("rtol") is not None else expected.rtol
         wrap = bool(spec.get("wrap", False))
+        from optkin.problems.schema import parse_value_path
+
         tokens = parse_value_path(path)
         ok, got = _evaluate(out, tokens, 0, None, None,
                             lambda v, w=want, t=tol, r=rtol, a=wrap: _close(v, w, t, r, a))
@@ -385,9 +386,12 @@ def _model_warmup(mech: Any) -> tuple[float, str | None]:
     return time.perf_counter() - t0, None
 
 
-#: ``v`` as strict JSON data: :func:`optkin.results.jsonable` (NaN and inf become None,
-#: anything else unknown its repr), under the name the runner has always exported.
-clean_json = jsonable
+def clean_json(v: Any) -> Any:
+    """``v`` as strict JSON data: :func:`optkin.results.jsonable` (NaN and inf become None,
+    anything else unknown its repr), under the name the runner has always exported."""
+    from optkin.results import jsonable
+
+    return jsonable(v)
 
 
 def _output_success(output: dict[str, Any]) -> bool:
@@ -415,6 +419,8 @@ def _abandoned_record(i: int, task: Any, why: str, elapsed: float | None) -> dic
 
 def run_task_record(mech: Any, task: Any, i: int, ctx: TaskContext) -> dict[str, Any]:
     """Run task ``i`` and return its JSON-ready record (never raises for the task's sake)."""
+    from optkin.problems.tasks import run_task
+
     t0 = time.perf_counter()
     output: dict[str, Any] | None = None
     message = ""
@@ -488,6 +494,8 @@ def run_problem(
     subset of the tasks (a unit of a problem split for scheduling; the other tasks are
     left out of the result).
     """
+    from optkin.problems.tasks import TaskContext
+
     t_start = time.perf_counter()
     started = _now()
     mech = problem.mechanism
@@ -540,6 +548,8 @@ def run_problem(
 
 def _load_any(data: bytes, display: str, source: str) -> Problem:
     """:func:`load_problem_bytes`, with every failure turned into the file's error."""
+    from optkin.problems.schema import load_problem_bytes
+
     try:
         return load_problem_bytes(data, display, path=source, check=True)
     except ProblemFileError:
@@ -697,10 +707,6 @@ def _write_summary(out: Path, rows: Iterable[dict[str, Any]]) -> Path:
     path = out / "summary.csv"
     atomic_write(path, buf.getvalue().encode("utf-8"))
     return path
-
-
-#: Largest problem file read (bytes); larger files are invalid without being parsed.
-MAX_FILE_BYTES = 4 << 20
 
 
 def _read_problem_file(info: ProblemFileInfo) -> bytes:
