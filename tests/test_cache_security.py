@@ -89,6 +89,15 @@ def residual(d: float, x) -> float:
 _MODELS: dict[float, Model] = {}
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _forget_models():
+    """The models are shared by this module's tests only: a test elsewhere that checks a
+    five-bar topology is released once its models are (test_architecture's
+    clear_cache test) must not find these holding it."""
+    yield
+    _MODELS.clear()
+
+
 def interpreted_model(d: float) -> Model:
     """The model of five_bar(..., d) built with compiling off (it reads no cache)."""
     if d not in _MODELS:
