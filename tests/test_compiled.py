@@ -541,6 +541,28 @@ def test_memo_function_reads_back_only_what_it_wrote(tmp_path, monkeypatch):
     assert len(calls) == 4  # not private: not read
 
 
+def test_fingerprint_is_the_graphs_digest_whether_built_or_read_back(tmp_path, monkeypatch):
+    """A library's cache key holds each Function's fingerprint: the SHA-256 of its
+    serialized graph (computed here with hashlib), the same for the Function a process
+    built and the one the next process reads back from the cache without serializing it;
+    another graph of the same signature has another fingerprint."""
+    import hashlib
+
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+    x = ca.SX.sym("x", 3)
+    built = cc.memo_function("fp", ["parts"], lambda: ca.Function("g", [x], [ca.sin(x)]))
+    want = hashlib.sha256(built.serialize().encode()).hexdigest()
+    assert cc.fingerprint(built) == want
+    read = cc.memo_function("fp", ["parts"], lambda: pytest.fail("rebuilt"))
+    assert cc.fingerprint(read) == want
+    fresh = ca.Function("g", [x], [ca.sin(x)])  # built again in this process, not memoized
+    assert cc.fingerprint(fresh) == want
+    other = ca.Function("g", [x], [ca.cos(x)])
+    assert cc.fingerprint(other) == hashlib.sha256(other.serialize().encode()).hexdigest()
+    assert cc.fingerprint(other) != want
+    assert cc._digest("t", [read]) == cc._digest("t", [fresh]) != cc._digest("t", [other])
+
+
 def test_geometries_of_a_topology_share_buffers_without_mixing_them():
     """Models of one topology share each evaluator's buffers in a thread (a new geometry
     sets none up); calls that alternate between geometries each see their own, checked

@@ -155,7 +155,7 @@ class _Base:
         from ..model import complexify as cx
 
         self.f_sx = cc.memo_function(
-            "homotopy_cx", [f.serialize(), _source_digest(cx.__file__)], lambda: complexify(f))
+            "homotopy_cx", [cc.fingerprint(f), _source_digest(cx.__file__)], lambda: complexify(f))
         self.key = tag
         # compiled in the background (a 6-6 platform's library takes gcc about a second,
         # a 3-RPR's 0.3 s): meanwhile the interpreted Function answers, with the same
@@ -621,7 +621,7 @@ class _Tracker:
         # built op by op in Python (a 3-RPR's SX step 0.13 s, a 6-6 platform's 0.03 s):
         # kept serialized in the cache, read back in a few ms by the next process
         chunk = cc.memo_function("homotopy_chunk", [
-            sys.f_sx.serialize(), repr((h0, hmax, hmin, big, accept_tol, grow, sx, newton,
+            cc.fingerprint(sys.f_sx), repr((h0, hmax, hmin, big, accept_tol, grow, sx, newton,
                                          predictor, CHUNK, target)), _source_digest()], build)
 
         # compiled in the background: until the library is ready (about a second), runs
