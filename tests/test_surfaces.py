@@ -110,3 +110,111 @@ def test_similar_triangles_make_whole_sections_singular():
     rho = np.linalg.norm(Q[:, None] + s_ * base[None] - base[None], axis=-1)
     region = np.all((rho >= 2) & (rho <= 15), axis=1).sum() * g * g
     assert 0.85 * region <= patch <= region * 1.001
+
+
+# ---------------------------------------------------------------------------------------
+# a translational spatial platform: the Delta, in (x, y, z)
+# ---------------------------------------------------------------------------------------
+RB, RP, LA, LB = 0.2, 0.05, 0.3, 0.8  # base and platform radii, arm and forearm lengths
+_U = np.stack([np.cos(2 * np.pi * np.arange(3) / 3), np.sin(2 * np.pi * np.arange(3) / 3),
+               np.zeros(3)], 1)  # the legs' radial directions
+_EZ = np.array([0.0, 0.0, 1.0])
+
+
+def _forearms(theta, p):
+    """Forearm vectors P_i - E_i (N, 3, 3) of the Delta written here: elbow E_i = RB u_i +
+    LA (cos theta_i u_i - sin theta_i e_z) (the arm turns about the tangent to the base
+    circle, down for theta > 0), platform joint P_i = p + RP u_i."""
+    c, s = np.cos(theta)[..., None], np.sin(theta)[..., None]
+    E = RB * _U + LA * (c * _U - s * _EZ)
+    return p[:, None, :] + RP * _U - E
+
+
+def _coplanarity(F):
+    """det of the three forearm directions: zero exactly when the forearms are parallel
+    to one plane (the Delta's parallel singularity: the platform gains a translation)."""
+    return np.linalg.det(F) / np.prod(np.linalg.norm(F, axis=-1), axis=-1)
+
+
+def _leg_inverse(p):
+    """Both closed-form postures of each leg (N, 3, 2) at platform positions p (N, 3):
+    |w - LA cos(t) u + LA sin(t) e_z| = LB with w = p + (RP - RB) u is
+    A cos t + B sin t = C; NaN where the leg does not reach."""
+    w = p[:, None, :] + (RP - RB) * _U
+    A = -2 * LA * np.einsum("nij,ij->ni", w, _U)
+    B = 2 * LA * w[..., 2]
+    C = LB ** 2 - np.sum(w * w, -1) - LA ** 2
+    with np.errstate(invalid="ignore"):
+        half = np.arccos(C / np.hypot(A, B))
+    mid = np.arctan2(B, A)
+    return np.stack([mid + half, mid - half], -1)
+
+
+@pytest.fixture(scope="module")
+def delta_surface():
+    return singular_surfaces(optkin.mechanisms.delta(RB, RP, LA, LB), slices=12)
+
+
+def test_delta_vertices_make_the_forearms_coplanar(delta_surface):
+    s = delta_surface
+    assert s.success and s.names == ("x", "y", "z") and len(s.triangles) > 1000
+    theta, p = s.v[:, :3], s.v[:, 3:6]
+    F = _forearms(theta, p)
+    np.testing.assert_allclose(np.linalg.norm(F, axis=-1), LB, atol=1e-9)  # closed
+    assert np.max(np.abs(_coplanarity(F))) < 1e-8
+    assert np.max(s.residual) < 1e-9
+    np.testing.assert_array_equal(s.vertices, p)
+    # nothing traced off the surface, and every section holds some of it
+    assert set(np.round(p[:, 2], 12)) <= set(np.round(s.sections, 12))
+    assert np.all(np.isin(np.round(s.sections[2:-2], 12), np.round(p[:, 2], 12)))
+
+
+def _sign_changes(z0, on):
+    """(edges, misses): the grid edges of the section at z0 along which the coplanarity
+    determinant changes sign in one posture combination (it vanishes between their ends),
+    and how many of them lie farther from the points ``on`` (M, 2) than the grid spacing
+    plus the continuation's step."""
+    g = np.linspace(-1.1, 1.1, 90)
+    h = g[1] - g[0]
+    X, Y = np.meshgrid(g, g, indexing="ij")
+    p = np.stack([X.ravel(), Y.ravel(), np.full(X.size, z0)], 1)
+    T = _leg_inverse(p)
+    edges = misses = 0
+    for combo in np.ndindex(2, 2, 2):
+        th = np.stack([T[:, i, combo[i]] for i in range(3)], 1)
+        with np.errstate(invalid="ignore"):
+            D = _coplanarity(_forearms(th, p)).reshape(X.shape)
+        for di, dj in ((1, 0), (0, 1)):
+            a, b = D[:D.shape[0] - di, :D.shape[1] - dj], D[di:, dj:]
+            for i, j in np.argwhere(np.isfinite(a) & np.isfinite(b) & (a * b < 0)):
+                mid = np.array([g[i] + di * h / 2, g[j] + dj * h / 2])
+                edges += 1
+                misses += int(np.min(np.hypot(*(on - mid).T)) > h + 0.25 * LB)
+    return edges, misses
+
+
+def test_delta_surface_misses_no_sign_change_of_the_condition(delta_surface):
+    """Brute force, written here: on a grid of each of three sections, every grid edge along
+    which the coplanarity determinant changes sign in one posture combination lies within
+    reach of the section's traced vertices; with half of each section's curves left out,
+    the same count finds the gap (the check can fail)."""
+    s = delta_surface
+    for z0 in s.sections[[3, 5, 8]]:
+        on = s.vertices[np.isclose(s.vertices[:, 2], z0, atol=1e-12), :2]
+        edges, misses = _sign_changes(z0, on)
+        assert edges > 50 and misses == 0, (z0, edges, misses)
+    z0 = s.sections[5]
+    on = s.vertices[np.isclose(s.vertices[:, 2], z0, atol=1e-12), :2]
+    assert _sign_changes(z0, on[on[:, 0] < 0])[1] > 10  # the half x > 0 left out
+
+
+def test_delta_arguments():
+    d = optkin.mechanisms.delta(RB, RP, LA, LB)
+    with pytest.raises(optkin.MechanismError, match="use space='task'"):
+        singular_surfaces(d, space="joint")
+    with pytest.raises(optkin.MechanismError, match="option range"):
+        singular_surfaces(d, range=(0.2, -0.2))
+    with pytest.raises(optkin.MechanismError, match="one fixed platform coordinate"):
+        optkin.singular_curves(d, plane="workspace", kind="serial", fixed={"z": -0.6})
+    s = singular_surfaces(d, slices=3, range=(-0.7, -0.5))
+    np.testing.assert_allclose(s.sections, [-0.65, -0.6, -0.55])

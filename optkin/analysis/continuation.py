@@ -45,7 +45,7 @@ from ..errors import MechanismError
 from ..limits import SAFETY, Deadline, check_size, largest_size, memory_budget, show
 from ..mechanism import Mechanism
 from ..model import get_model
-from ..model.charts import PlanarChart, planar_chart
+from ..model.charts import PlanarChart, planar_chart, translational_chart
 from ..model.compiled import FastFn, map_shared
 from ..results import INACCURATE, MEMORY_LIMIT, OPTIMAL, TIME_LIMIT, jsonable
 
@@ -1126,8 +1126,10 @@ def singular_curves(
     ----------
     mech : Mechanism
         A planar platform whose legs are distance constraints with one actuator each
-        (2-DoF, or 3-DoF with one coordinate fixed), a 1-DoF Khalil mechanism
-        (``kind="closure"``: its C-space curve) or a 2-DoF one.
+        (2-DoF, or 3-DoF with one coordinate fixed), a translational spatial platform
+        with such legs and closed-form leg inverses (the Delta: parallel curves in the
+        workspace plane of a section at one fixed coordinate, e.g. ``fixed={"z": -0.6}``),
+        a 1-DoF Khalil mechanism (``kind="closure"``: its C-space curve) or a 2-DoF one.
     plane : "joint", "workspace" or (name, name)
         The plane the curves are shown in: the actuated joints q_a, the platform
         coordinates, or any two coordinates of v = (q_a, x). The curves themselves live
@@ -1273,10 +1275,21 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
             raise MechanismError(
                 f"kind: expected 'parallel', 'serial', 'limit', 'closure' or 'all', got {show(k)}")
     chart = planar_chart(model)
-    if model.platform is not None and chart is None:
-        raise MechanismError(
-            f"{mech.name}: singular curves support planar platforms whose legs are distance "
-            "constraints (one actuator each) and Khalil mechanisms in this version")
+    if chart is None and model.platform is not None:
+        # a translational spatial platform (the Delta): its sections at a fixed
+        # translation, seeded from the same closed-form leg inverses
+        chart = translational_chart(model)
+        if chart is None:
+            raise MechanismError(
+                f"{mech.name}: singular curves support planar platforms and translational "
+                "spatial platforms (x, y, z) whose legs are distance constraints (one "
+                "actuator each), and Khalil mechanisms, in this version")
+        if kinds != ["parallel"] or len(fixed_map) != 1 or min(fixed_map) < na \
+                or min(pidx) < na:
+            raise MechanismError(
+                f"{mech.name}: a translational spatial platform's singular curves are "
+                "parallel singularities in a section at one fixed platform coordinate, e.g. "
+                "plane='workspace', kind='parallel', fixed={'z': -0.7}")
     n = int(grid or 32)
     hmax = float(step or DEFAULT_STEP)
     # plane bounds

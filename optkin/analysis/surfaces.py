@@ -1,10 +1,12 @@
-"""Singularity surfaces of 3-DoF planar platforms as triangulated meshes.
+"""Singularity surfaces of 3-DoF platforms as triangulated meshes.
 
 The parallel singularities (det W_p = det A = 0) of a 3-DoF planar platform form a surface
-in the task space (x, y, phi) and, mapped through the closure, in the joint space. It is
+in the task space (x, y, phi) and, mapped through the closure, in the joint space; those of
+a translational spatial platform (the Delta) a surface in (x, y, z). It is
 traced here section by section: the curves of :func:`optkin.singular_curves` at
-``slices`` values of the third coordinate (phi for ``space="task"``, the first actuated
-joint for ``space="joint"``), every point a corrected point of the augmented system
+``slices`` values of the third coordinate (phi for ``space="task"``, z for a translational
+platform, the first actuated joint for ``space="joint"``), every point a corrected point
+of the augmented system
 [Phi; det W_p] (residual about 1e-11), then consecutive sections' curves are stitched
 into triangle strips: each curve is paired with the nearest curve of the next section
 (mean distance of its points, below ``link`` times the mechanism's size), closed curves
@@ -40,6 +42,7 @@ SINGULAR_SURFACES_DEFAULTS: dict[str, Any] = {
     "slices": 72,  # sections (>= 2)
     "step": 0.25,  # largest continuation step in each section (scaled units, > 0)
     "link": 0.6,  # largest mean distance between stitched curves, in mechanism sizes (> 0)
+    "range": None,  # (lo, hi) of the sectioning coordinate (None: its whole range)
     "time_limit": 300.0,  # seconds (capped by the time budget); later sections left out
 }
 
@@ -129,35 +132,47 @@ class SingularSurface:
         return fig
 
 
-def _strip(A: np.ndarray, B: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> list[tuple]:
+def _strip(A: np.ndarray, B: np.ndarray, ia: np.ndarray, ib: np.ndarray,
+           longest: float = np.inf) -> list[tuple]:
     """Triangles between polylines A and B (point arrays, same orientation), choosing the
-    shorter diagonal at every step; ia, ib their vertex indices."""
+    shorter diagonal at every step; ia, ib their vertex indices. A triangle with an edge
+    across the strip longer than ``longest`` is left out: where one curve runs on past the
+    other (a piece ending at a branch point or a stroke), the strip would otherwise fan
+    from its last point across the section."""
     tri = []
     i = j = 0
     na, nb = len(A), len(B)
+    far = longest * longest
     while i < na - 1 or j < nb - 1:
         if i == na - 1 or (j < nb - 1 and np.sum((A[i] - B[j + 1]) ** 2)
                            <= np.sum((A[i + 1] - B[j]) ** 2)):
-            tri.append((ia[i], ib[j], ib[j + 1]))
+            t, d = (ia[i], ib[j], ib[j + 1]), max(np.sum((A[i] - B[j]) ** 2),
+                                                  np.sum((A[i] - B[j + 1]) ** 2))
             j += 1
         else:
-            tri.append((ia[i], ib[j], ia[i + 1]))
+            t, d = (ia[i], ib[j], ia[i + 1]), max(np.sum((A[i] - B[j]) ** 2),
+                                                  np.sum((A[i + 1] - B[j]) ** 2))
             i += 1
+        if d <= far:
+            tri.append(t)
     return tri
 
 
 def singular_surfaces(mech: Mechanism, space: str = "task",
                       **options: Any) -> SingularSurface:
-    """The parallel singularity surface of a 3-DoF planar platform as a triangle mesh
-    (see the module docstring).
+    """The parallel singularity surface of a 3-DoF planar or translational platform as a
+    triangle mesh (see the module docstring).
 
     Parameters
     ----------
     mech : Mechanism
-        A 3-DoF planar platform with distance legs.
+        A 3-DoF planar platform with distance legs, or a translational spatial platform
+        whose legs are distance legs with closed-form inverses (the Delta).
     space : "task" or "joint"
-        (x, y, phi), sections at fixed phi over [-pi, pi); or the actuated joints,
-        sections at fixed first actuated joint over its stroke (``limits``) or its range.
+        (x, y, phi), sections at fixed phi over [-pi, pi) (a translational platform:
+        (x, y, z), sections at fixed z over the legs' reach); or the actuated joints,
+        sections at fixed first actuated joint over its stroke (``limits``) or its range
+        (planar platforms).
     **options
         The options below, by keyword, over :data:`SINGULAR_SURFACES_DEFAULTS` (an unknown
         name raises :class:`~optkin.MechanismError`).
@@ -174,6 +189,9 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
         Largest continuation step in each section (scaled units).
     link : float
         Largest mean distance between stitched curves, in mechanism sizes.
+    range : (lo, hi), optional
+        The sections' span of the third coordinate (default: phi's turn, z's reach, the
+        first actuator's stroke).
     time_limit : float
         Seconds (capped by the time budget); the sections not reached are left out and
         the result says so (status ``"time_limit"``).
@@ -184,6 +202,7 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
     """
     from .._checks import check_mechanism, check_option
     from ..limits import Deadline, time_budget
+    from ..model.charts import translational_chart
     from ..solvers.common import merge_options
     from .aspects import _first_range, _limit_map
     from .continuation import _names_of, singular_curves
@@ -204,22 +223,38 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
                              f"{space!r}")
     slices = num("slices", integer=True, lo=2)
     check_mechanism(mech, who)
+    span = opts["range"]
+    if span is not None:
+        span = _span(span, who)
     model = get_model(mech)
     turn = [n for n, a in zip(model.x_names, model.x_angle) if a]
-    if model.na != 3 or model.nx != 3 or len(turn) != 1:
+    spatial = model.na == 3 and not turn and translational_chart(model) is not None
+    if model.na != 3 or model.nx != 3 or (len(turn) != 1 and not spatial):
         raise MechanismError(f"singular_surfaces: {mech.name} is not a 3-DoF planar "
-                             "platform (three actuators; unknowns x, y and one orientation)")
+                             "platform (three actuators; unknowns x, y and one orientation) "
+                             "nor a translational one with distance legs (unknowns x, y, z)")
+    if spatial and space != "task":
+        raise MechanismError(f"singular_surfaces: {mech.name} translates in space: its "
+                             "surface is traced in the task space (x, y, z); use "
+                             "space='task'")
     names_all = _names_of(mech)
     lim = _limit_map(mech, names_all, limits)
     na = model.na
-    if space == "task":
+    if space == "task" and spatial:
+        third = model.x_names[2]
+        lo, hi = span if span is not None else translational_chart(model).reach_box()[2]
+        values = np.linspace(lo, hi, int(slices) + 2)[1:-1]
+        plane, cols = "workspace", [na, na + 1, na + 2]
+        names = (model.x_names[0], model.x_names[1], third)
+    elif space == "task":
         third = turn[0]
-        values = np.linspace(-np.pi, np.pi, int(slices), endpoint=False)
+        values = (np.linspace(-np.pi, np.pi, int(slices), endpoint=False) if span is None
+                  else np.linspace(span[0], span[1], int(slices)))
         plane, cols = "workspace", [na, na + 1, na + 2]
         names = (model.x_names[0], model.x_names[1], third)
     else:
         third = names_all[0]
-        lo, hi = _first_range(who, model, names_all, lim)
+        lo, hi = span if span is not None else _first_range(who, model, names_all, lim)
         values = np.linspace(lo, hi, int(slices) + 2)[1:-1]
         # the section plane (the other two actuated joints), then the sectioning joint
         plane, cols = "joint", [1, 2, 0]
@@ -235,7 +270,7 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
             late = True
             secs.append([])
             continue
-        if space == "task":
+        if space == "task" and not spatial:
             patch = _whole_section(mech, model, float(val), bounds, lim)
             if patch is not None:
                 planes.append(float(val))
@@ -252,20 +287,23 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
             for j, (a, b) in lim.items():
                 keep &= (cv.v[:, j] >= a) & (cv.v[:, j] <= b)
             if keep.all():
-                pieces.append((cv.v[:, cols], cv.v, cv.closed, cv.residual))
+                pieces.append((cv.v[:, cols], cv.v, cv.closed, cv.residual,
+                               _mode_of(cv.working_mode)))
                 continue
             # the runs inside the strokes, as open polylines
             k = np.flatnonzero(np.diff(np.r_[0, keep.astype(int), 0]))
             for s, e in zip(k[::2], k[1::2]):
                 if e - s >= 2:
-                    pieces.append((cv.v[s:e][:, cols], cv.v[s:e], False, cv.residual[s:e]))
+                    wm = None if cv.working_mode is None else cv.working_mode[s:e]
+                    pieces.append((cv.v[s:e][:, cols], cv.v[s:e], False, cv.residual[s:e],
+                                   _mode_of(wm)))
         secs.append(pieces)
     # vertices
     verts, full, res, index = [], [], [], []
     n = 0
     for pieces in secs:
         idx = []
-        for P, V, _, r in pieces:
+        for P, V, _, r, _ in pieces:
             verts.append(P)
             full.append(V)
             res.append(r)
@@ -278,10 +316,11 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
     # cross the picture from pi to -pi)
     for ka, kb in [(k, k + 1) for k in range(len(secs) - 1)]:
         used = set()
-        for ia, (A, _, ca_, _) in enumerate(secs[ka]):
+        for ia, (A, _, ca_, _, ma) in enumerate(secs[ka]):
             best, bj = np.inf, None
-            for jb, (B, _, cb_, _) in enumerate(secs[kb]):
-                if jb in used or ca_ != cb_:
+            for jb, (B, _, cb_, _, mb) in enumerate(secs[kb]):
+                if jb in used or ca_ != cb_ or (ma is not None and mb is not None
+                                                and ma != mb):
                     continue
                 d = np.sqrt(((A[:, None, :2] - B[None, :, :2]) ** 2).sum(-1)).min(axis=1)
                 dm = float(np.mean(d)) / L
@@ -308,7 +347,7 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
                 Ib = np.r_[Ib, Ib[:1]]
             elif np.sum((a2[0] - b2[0]) ** 2) > np.sum((a2[0] - b2[-1]) ** 2):
                 b2, Ib = b2[::-1], Ib[::-1]
-            tri += _strip(a2, b2, Ia, Ib)
+            tri += _strip(a2, b2, Ia, Ib, longest=link)
         open_curves += len(secs[kb]) - len(used)
     for P, Vfull, r, Tp in patches:        # planar patches of wholly singular sections
         verts.append(P)
@@ -332,6 +371,28 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
     return SingularSurface(mech.name, space, names, V, Vf, T, R, np.asarray(values),
                            open_curves, ok, status, msg,
                            time.perf_counter() - t0, planes=planes)
+
+
+def _mode_of(wm: np.ndarray | None) -> tuple[int, ...] | None:
+    """A curve's working mode (the signs of B's diagonal held by most of its points; a
+    curve meets only curves of its own mode in the next section), None when unknown."""
+    if wm is None or len(wm) == 0:
+        return None
+    rows, counts = np.unique(np.asarray(wm, dtype=int), axis=0, return_counts=True)
+    return tuple(int(t) for t in rows[int(np.argmax(counts))])
+
+
+def _span(v: Any, who: str) -> tuple[float, float]:
+    """The option ``range`` as (lo, hi), lo < hi, both finite."""
+    try:
+        lo, hi = (float(t) for t in v)
+    except (TypeError, ValueError):
+        raise MechanismError(f"{who}: option range: expected (lo, hi), two numbers, got "
+                             f"{v!r}") from None
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise MechanismError(f"{who}: option range: expected finite lo < hi, got "
+                             f"({lo:g}, {hi:g})")
+    return lo, hi
 
 
 def _whole_section(mech: Mechanism, model: Any, val: float, bounds: Any, lim: dict,

@@ -11,7 +11,11 @@ with ``n`` normal to the centre's velocity dC/dq_a. The continuation
 (:mod:`optkin.analysis.continuation`) seeds from this chart, and aspects and workspaces
 (:mod:`optkin.analysis.aspects`) label and project with it.
 
-:func:`planar_chart` returns the chart of a model, or None when the model has none. Its
+:func:`planar_chart` returns the chart of a model, or None when the model has none.
+:func:`translational_chart` returns the same chart for a spatial platform that only
+translates (the Delta: x, y, z), whose legs are distance constraints too (spheres instead
+of circles); only its leg inverses, posture combinations and reach box are used (the
+sections of :func:`optkin.singular_surfaces` at fixed z), not the planar loci. Its
 Functions are built once per topology (:meth:`Model.cached`); the numbers are the model's
 geometry.
 """
@@ -29,7 +33,7 @@ import numpy as np
 
 from . import compiled as cc
 
-__all__ = ["PlanarChart", "planar_chart"]
+__all__ = ["PlanarChart", "planar_chart", "translational_chart"]
 
 #: Points per evaluation of a chart Function (memory stays bounded for large grids).
 CHUNK = 2048
@@ -200,13 +204,15 @@ class PlanarChart:
         return (-2.0 * L, 2.0 * L)
 
     def reach_box(self) -> np.ndarray:
-        """A box [[lo, hi], [lo, hi]] of the platform's translation coordinates that
-        every closed configuration lies in (each leg's platform point within reach of its
-        base: a disc, plus the platform point's distance from the platform origin)."""
-        cs, rs = _reach_discs(self.model)
+        """A box [[lo, hi], ...] of the platform's translation coordinates (x, y; x, y, z
+        for a translational spatial platform) that every closed configuration lies in
+        (each leg's platform point within reach of its base: a disc or a ball, plus the
+        platform point's distance from the platform origin)."""
+        d = len(self.translation)
+        cs, rs = _reach_discs(self.model, d)
         lo = np.max(cs - rs[:, None], axis=0)
         hi = np.min(cs + rs[:, None], axis=0)
-        return np.array([[lo[0], hi[0]], [lo[1], hi[1]]])
+        return np.stack([lo, hi], 1)
 
     # ------------------------------------------------------------------ point platforms
     @property
@@ -235,6 +241,30 @@ class PlanarChart:
         m = c0 + a[:, None] * e
         nrm = np.stack([-e[:, 1], e[:, 0]], 1)
         return [(m + h[:, None] * nrm, ok), (m - h[:, None] * nrm, ok)]
+
+
+def translational_chart(model: Any) -> PlanarChart | None:
+    """The closed-form chart of a spatial platform that only translates (x, y, z), or
+    None: legs that are all distance legs with one actuator each and closed-form inverses,
+    three closure rows, the three translations the only unknowns (the Delta). Its planar
+    loci (circles, serial loci, placing a leg's point) do not apply."""
+    plat = model.platform
+    if plat is None or plat.space_dim != 3 or not model.fully_parallel:
+        return None
+    form = model.distance_form()
+    if form is None or not model.nx == model.n_platform == model.m == 3 or any(model.x_angle):
+        return None
+    from .inverse import ClosedPart
+
+    parts = model.inverse_parts()
+    if not all(isinstance(pt, ClosedPart) for pt in parts):
+        return None
+    mech = model.mech
+    return PlanarChart(model=model, n_legs=len(parts),
+                       branches=tuple(int(pt.branches) for pt in parts),
+                       qa_angle=np.array([bool(mech.revolute[i]) for i in mech.active_index]),
+                       length_actuated=np.array(form.length_actuated),
+                       translation=(0, 1, 2), orientation=())
 
 
 def planar_chart(model: Any) -> PlanarChart | None:
@@ -305,18 +335,19 @@ def _build(model: Any, key: str) -> ca.Function:
     raise KeyError(key)
 
 
-def _reach_discs(model: Any) -> tuple[np.ndarray, np.ndarray]:
+def _reach_discs(model: Any, dims: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """Per leg, a disc (centre (2,), radius) holding every position of the platform
     origin's translation, from the leg's distance form: the centre C moves on a circle
     about the driving revolute's axis (radius |C - axis| + r), along a slider (within twice
     the mechanism's size), or stays (the leg length up to twice the size); the radius
-    grows by the platform point's distance from the platform origin."""
+    grows by the platform point's distance from the platform origin. ``dims=3``: balls
+    (centre (3,)) for a spatial platform."""
     L = float(model.length)
     cs, rs = [], []
     for leg in model.mech.legs:
         d = leg.distance
         c0 = np.asarray(d.centre, dtype=float)
-        b = float(np.hypot(*np.asarray(leg.platform_point, dtype=float)[:2]))
+        b = float(np.linalg.norm(np.asarray(leg.platform_point, dtype=float)[:dims]))
         if d.length is None:  # the actuated joint is the distance
             centre, reach = c0, 2.0 * L
         elif leg.kinds[0] == "R" and d.driver > 0:
@@ -327,6 +358,6 @@ def _reach_discs(model: Any) -> tuple[np.ndarray, np.ndarray]:
             reach = float(np.linalg.norm(c0 - centre)) + float(d.length)
         else:  # a slider moves the centre
             centre, reach = c0, 2.0 * L + float(d.length)
-        cs.append(centre[:2])
+        cs.append(centre[:dims])
         rs.append(reach + b)
     return np.array(cs), np.array(rs)
