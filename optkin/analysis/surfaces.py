@@ -286,17 +286,26 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
             keep = np.ones(len(cv.v), dtype=bool)
             for j, (a, b) in lim.items():
                 keep &= (cv.v[:, j] >= a) & (cv.v[:, j] <= b)
-            if keep.all():
+            wm = None if cv.working_mode is None else np.asarray(cv.working_mode, dtype=int)
+            # the runs within the strokes and in one working mode (a curve through a serial
+            # singularity, as a Delta's do, passes from one sheet of the surface to another)
+            cut = ~keep
+            change = np.zeros(len(cv.v), dtype=bool)
+            if wm is not None and len(wm) > 1:
+                change[1:] = np.any(wm[1:] != wm[:-1], axis=1)
+            if not cut.any() and not change.any():
                 pieces.append((cv.v[:, cols], cv.v, cv.closed, cv.residual,
-                               _mode_of(cv.working_mode)))
+                               _mode_of(wm)))
                 continue
-            # the runs inside the strokes, as open polylines
-            k = np.flatnonzero(np.diff(np.r_[0, keep.astype(int), 0]))
-            for s, e in zip(k[::2], k[1::2]):
-                if e - s >= 2:
-                    wm = None if cv.working_mode is None else cv.working_mode[s:e]
-                    pieces.append((cv.v[s:e][:, cols], cv.v[s:e], False, cv.residual[s:e],
-                                   _mode_of(wm)))
+            start = 0
+            for k in range(1, len(cv.v) + 1):
+                if k < len(cv.v) and keep[k] and keep[k - 1] and not change[k]:
+                    continue
+                if keep[start] and k - start >= 2:
+                    pieces.append((cv.v[start:k][:, cols], cv.v[start:k], False,
+                                   cv.residual[start:k],
+                                   _mode_of(None if wm is None else wm[start:k])))
+                start = k
         secs.append(pieces)
     # vertices
     verts, full, res, index = [], [], [], []
