@@ -164,6 +164,17 @@ def test_delta_vertices_make_the_forearms_coplanar(delta_surface):
     assert np.max(np.abs(_coplanarity(F))) < 1e-8
     assert np.max(s.residual) < 1e-9
     np.testing.assert_array_equal(s.vertices, p)
+    # a triangle joins points of one sheet: each leg in the same posture at its three
+    # vertices (the sign of F_i . dE_i/dtheta_i, B's diagonal; a leg near its serial
+    # singularity, where the sign is moot, is not compared)
+    dE = LA * (-np.sin(theta)[..., None] * _U - np.cos(theta)[..., None] * _EZ)
+    b = np.einsum("nij,nij->ni", F, dE) / (LA * LB)
+    bt = b[s.triangles]  # (T, 3 vertices, 3 legs)
+    clear = np.abs(bt) > 1e-2
+    mixed = np.any(clear & (bt > 0), axis=1) & np.any(clear & (bt < 0), axis=1)
+    assert not mixed.any(), int(mixed.sum())
+    dz = np.ptp(p[s.triangles, 2], axis=1)
+    assert np.all(dz <= np.max(np.diff(s.sections)) + 1e-12)  # within one gap
     # nothing traced off the surface, and every section holds some of it
     assert set(np.round(p[:, 2], 12)) <= set(np.round(s.sections, 12))
     assert np.all(np.isin(np.round(s.sections[2:-2], 12), np.round(p[:, 2], 12)))
