@@ -228,7 +228,8 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
         span = _span(span, who)
     model = get_model(mech)
     turn = [n for n, a in zip(model.x_names, model.x_angle) if a]
-    spatial = model.na == 3 and not turn and translational_chart(model) is not None
+    tchart = None if turn else translational_chart(model)
+    spatial = tchart is not None
     if model.na != 3 or model.nx != 3 or (len(turn) != 1 and not spatial):
         raise MechanismError(f"singular_surfaces: {mech.name} is not a 3-DoF planar "
                              "platform (three actuators; unknowns x, y and one orientation) "
@@ -242,7 +243,7 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
     na = model.na
     if space == "task" and spatial:
         third = model.x_names[2]
-        lo, hi = span if span is not None else translational_chart(model).reach_box()[2]
+        lo, hi = span if span is not None else tchart.reach_box()[2]
         values = np.linspace(lo, hi, int(slices) + 2)[1:-1]
         plane, cols = "workspace", [na, na + 1, na + 2]
         names = (model.x_names[0], model.x_names[1], third)
@@ -289,13 +290,12 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
             wm = None if cv.working_mode is None else np.asarray(cv.working_mode, dtype=int)
             # the runs within the strokes and in one working mode (a curve through a serial
             # singularity, as a Delta's do, passes from one sheet of the surface to another)
-            cut = ~keep
             change = np.zeros(len(cv.v), dtype=bool)
             if wm is not None and len(wm) > 1:
                 change[1:] = np.any(wm[1:] != wm[:-1], axis=1)
-            if not cut.any() and not change.any():
+            if keep.all() and not change.any():
                 pieces.append((cv.v[:, cols], cv.v, cv.closed, cv.residual,
-                               _mode_of(wm)))
+                               None if wm is None else tuple(wm[0].tolist())))
                 continue
             start = 0
             for k in range(1, len(cv.v) + 1):
@@ -304,7 +304,7 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
                 if keep[start] and k - start >= 2:
                     pieces.append((cv.v[start:k][:, cols], cv.v[start:k], False,
                                    cv.residual[start:k],
-                                   _mode_of(None if wm is None else wm[start:k])))
+                                   None if wm is None else tuple(wm[start].tolist())))
                 start = k
         secs.append(pieces)
     # vertices
@@ -327,7 +327,7 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
         used = set()
         for ia, (A, _, ca_, _, ma) in enumerate(secs[ka]):
             best, bj = np.inf, None
-            for jb, (B, _, cb_, _, mb) in enumerate(secs[kb]):
+            for jb, (B, _, cb_, _, mb) in enumerate(secs[kb]):  # (one sheet: same mode)
                 if jb in used or ca_ != cb_ or (ma is not None and mb is not None
                                                 and ma != mb):
                     continue
@@ -380,15 +380,6 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
     return SingularSurface(mech.name, space, names, V, Vf, T, R, np.asarray(values),
                            open_curves, ok, status, msg,
                            time.perf_counter() - t0, planes=planes)
-
-
-def _mode_of(wm: np.ndarray | None) -> tuple[int, ...] | None:
-    """A curve's working mode (the signs of B's diagonal held by most of its points; a
-    curve meets only curves of its own mode in the next section), None when unknown."""
-    if wm is None or len(wm) == 0:
-        return None
-    rows, counts = np.unique(np.asarray(wm, dtype=int), axis=0, return_counts=True)
-    return tuple(int(t) for t in rows[int(np.argmax(counts))])
 
 
 def _span(v: Any, who: str) -> tuple[float, float]:
