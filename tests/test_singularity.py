@@ -445,3 +445,65 @@ def test_four_bar_actuator_singularities_depend_on_the_actuated_joint():
             seen["crank"] += exp_c
             seen["rocker"] += exp_r
     assert seen["crank"] >= 2 and seen["degenerate"] > 20
+
+
+# ---------------------------------------------------------------------------------------
+# Tsai's 3-UPU: its constraint singularities, derived here
+# ---------------------------------------------------------------------------------------
+#
+# Leg i (base joint at R u_i, platform joint at r u_i, u_i at 0, 120, 240 degrees, the
+# platform at p with its orientation kept) has universal joints whose first axis is the
+# tangent t_i = e_z x u_i and whose second axis w_i is t_i's normal in the plane
+# (-u_i, e_z), turned by the first joint angle theta: w_i = -cos(theta) u_i +
+# sin(theta) e_z; the platform's joint repeats both axes (Tsai's condition). The leg's
+# twists are rotations about t_i and w_i (through two points each) and the translation
+# along the leg; the one wrench reciprocal to them all is the couple n_i = t_i x w_i =
+# cos(theta) e_z + sin(theta) u_i. The leg s_i = p - d u_i (d = R - r) is normal to w_i:
+# tan(theta) = (u_i . p - d) / p_z, so n_i ~ a_i u_i + p_z e_z with a_i = u_i . p - d.
+# The platform can turn (a constraint singularity) where the three couples are coplanar:
+#   det[n_1; n_2; n_3] = p_z sin(120 deg) (a_1 a_2 + a_2 a_3 + a_3 a_1)
+# and, with sum u_i = 0 and sum (u_i . p)^2 = 3/2 (x^2 + y^2),
+#   a_1 a_2 + a_2 a_3 + a_3 a_1 = ((sum a_i)^2 - sum a_i^2) / 2 = 3 d^2 - 3/4 (x^2 + y^2):
+# above the base plane, the vertical cylinder x^2 + y^2 = (2 d)^2, whatever z; the
+# platform then turns about the normal of the couples' plane.
+
+def _upu3_config(m, R, r, p, guess=None):
+    u = np.c_[np.cos(2 * np.pi * np.arange(3) / 3), np.sin(2 * np.pi * np.arange(3) / 3),
+              np.zeros(3)]
+    rho = np.linalg.norm(p - (R - r) * u, axis=1)
+    res = optkin.forward(m, rho, guess=[*p, 0, 0, 0] if guess is None else guess, tol=1e-14)
+    assert res.success
+    np.testing.assert_allclose(res.pose[:3, 3], p, atol=1e-10)
+    np.testing.assert_allclose(res.pose[:3, :3], np.eye(3), atol=1e-10)  # translational
+    return res, u
+
+
+@pytest.mark.parametrize("R,r", [(1.0, 0.5), (1.2, 0.3)])
+def test_3upu_constraint_singularity_is_the_cylinder_of_radius_twice_R_minus_r(R, r):
+    m = M.upu3(R, r)
+    d = R - r
+    for ang, z in zip(RNG.uniform(0, 2 * np.pi, 3), RNG.uniform(0.4, 1.2, 3)):
+        e = np.array([np.cos(ang), np.sin(ang), 0.0])
+        # on the cylinder: a parallel singularity whose null motion turns the platform
+        # about the normal of the three couples
+        p = 2 * d * e + [0, 0, z]
+        res, u = _upu3_config(m, R, r, p)
+        rep = optkin.classify(m, res)
+        assert "parallel" in rep.types and "internal" in rep.types, rep.types
+        jac = optkin.jacobians(m, res)
+        names = list(jac.x_names)
+        v = np.linalg.svd(jac.W_p)[2][-1]
+        omega = v[[names.index(k) for k in ("qx", "qy", "qz")]]  # 2 qdot at the identity
+        assert np.linalg.norm(omega) > 0.1 * np.linalg.norm(v)  # it turns the platform
+        n = (u @ p - d)[:, None] * u + [0, 0, z]
+        assert abs(np.linalg.det(n)) < 1e-12
+        np.testing.assert_allclose(n @ omega / np.linalg.norm(omega), 0, atol=1e-9)
+        # off it, inside and outside: regular, and det W_p changes sign across it along
+        # the radius (the legs' joints near those on the cylinder on both sides)
+        dets = []
+        for f in (0.9, 1.1):
+            q, _ = _upu3_config(m, R, r, 2 * d * f * e + [0, 0, z])
+            assert np.abs(q.x[7:] - res.x[7:]).max() < 0.3  # the same branch of each leg
+            assert optkin.classify(m, q).types == set(), (f, optkin.classify(m, q).types)
+            dets.append(np.linalg.det(optkin.jacobians(m, q).W_p))
+        assert dets[0] * dets[1] < 0
