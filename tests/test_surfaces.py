@@ -14,6 +14,7 @@ from test_continuation import BASE3, PLAT3
 
 import optkin
 from optkin.analysis.surfaces import singular_surfaces
+from optkin.model import get_model
 
 LIMITS = {f"L{i}.rho": (10.0, 30.0) for i in (1, 2, 3)}
 
@@ -229,3 +230,82 @@ def test_delta_arguments():
         optkin.singular_curves(d, plane="workspace", kind="serial", fixed={"z": -0.6})
     s = singular_surfaces(d, slices=3, range=(-0.7, -0.5))
     np.testing.assert_allclose(s.sections, [-0.65, -0.6, -0.55])
+
+
+# ---------------------------------------------------------------------------------------
+# Tsai's 3-UPU: a translational mode of a platform with 19 unknowns, in (x, y, z)
+# ---------------------------------------------------------------------------------------
+# Each leg's constraint wrench is the couple n_i = t_i x w_i, normal to the two axes of its
+# universal joints (t_i the base circle's tangent, w_i normal to t_i and to the leg
+# s_i = p - d u_i, d = R - r): n_i ~ (u_i . p - d) u_i + p_z e_z. The platform turns (a
+# constraint singularity) where n_1, n_2, n_3 are coplanar; det[n] = p_z sin(120 deg)
+# (3 d^2 - 3/4 (x^2 + y^2)): above the base, the cylinder x^2 + y^2 = (2 d)^2.
+
+def _couples(p, d):
+    n = (np.einsum("nj,ij->ni", p, _U) - d)[..., None] * _U + p[:, None, 2:3] * _EZ
+    return np.linalg.det(n) / np.prod(np.linalg.norm(n, axis=-1), axis=-1)
+
+
+@pytest.fixture(scope="module")
+def upu_surface():
+    return singular_surfaces(optkin.mechanisms.upu3(1.0, 0.5), slices=6)
+
+
+def test_3upu_vertices_make_the_constraint_couples_coplanar(upu_surface):
+    s, d = upu_surface, 0.5
+    assert s.success, s.message
+    assert s.names == ("x", "y", "z") and len(s.triangles) > 100 and s.max_residual < 1e-9
+    p = s.v[:, 3:6]
+    np.testing.assert_array_equal(s.vertices, p)
+    # in the translational mode, the legs closed: the identity orientation (quaternion
+    # (1, 0, 0, 0)) and leg lengths |p - d u_i|
+    np.testing.assert_allclose(s.v[:, 6:10], np.tile([1.0, 0, 0, 0], (len(p), 1)), atol=1e-9)
+    rho = np.linalg.norm(p[:, None, :] - d * _U[None], axis=-1)
+    np.testing.assert_allclose(s.v[:, :3], rho, atol=1e-9)
+    assert np.max(np.abs(_couples(p, d))) < 1e-9
+    assert np.max(np.abs(np.hypot(p[:, 0], p[:, 1]) - 2 * d)) < 1e-8
+    # the model agrees: a parallel singularity at the vertices
+    m = optkin.mechanisms.upu3(1.0, 0.5)
+    for k in (0, len(p) // 2, len(p) - 1):
+        q = get_model(m).to_q(s.v[k, :3], s.v[k, 3:])
+        assert "parallel" in optkin.classify(m, q).types
+
+
+def test_3upu_arguments():
+    m = optkin.mechanisms.upu3(1.0, 0.5)
+    with pytest.raises(optkin.MechanismError, match="use space='task'"):
+        singular_surfaces(m, space="joint")
+    s = singular_surfaces(m, slices=2, range=(0.6, 0.9), bounds=[[-1.5, 1.5], [-1.5, 1.5]])
+    assert s.success and len(s.triangles) > 10
+    np.testing.assert_allclose(s.sections, [0.7, 0.8])
+    # a platform that turns as its legs move has no surface in (x, y, z)
+    with pytest.raises(optkin.MechanismError, match="turn its platform"):
+        singular_surfaces(optkin.mechanisms.rps3(), slices=2)
+
+
+def test_3upu_surface_misses_no_sign_change_of_the_condition(upu_surface):
+    """Brute force, written here: along 36 rays of each section, the couples' determinant
+    changes sign once between radii 0.1 and 1.9, and the section's vertices pass within the
+    continuation's step of that crossing; with a quarter of the vertices left out, some
+    crossing is missed (the check can fail)."""
+    s, d = upu_surface, 0.5
+    ang = np.linspace(0, 2 * np.pi, 36, endpoint=False)
+    r = np.linspace(0.105, 1.905, 181)  # (no node on the crossing itself)
+
+    def misses(z0, on):
+        out = 0
+        for a in ang:
+            e = np.array([np.cos(a), np.sin(a), 0.0])
+            D = _couples(r[:, None] * e + [0, 0, z0], d)
+            k = np.flatnonzero(D[:-1] * D[1:] < 0)
+            assert len(k) == 1
+            cross = 0.5 * (r[k[0]] + r[k[0] + 1]) * e[:2]
+            out += int(np.min(np.hypot(*(on - cross).T)) > 0.25 + r[1] - r[0])
+        return out
+
+    for z0 in s.sections:
+        on = s.vertices[np.isclose(s.vertices[:, 2], z0, atol=1e-12), :2]
+        assert misses(z0, on) == 0, z0
+    z0 = s.sections[2]
+    on = s.vertices[np.isclose(s.vertices[:, 2], z0, atol=1e-12), :2]
+    assert misses(z0, on[(on[:, 0] < 0) | (on[:, 1] < 0)]) > 3

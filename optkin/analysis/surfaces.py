@@ -2,7 +2,9 @@
 
 The parallel singularities (det W_p = det A = 0) of a 3-DoF planar platform form a surface
 in the task space (x, y, phi) and, mapped through the closure, in the joint space; those of
-a translational spatial platform (the Delta) a surface in (x, y, z). It is
+a translational spatial platform (the Delta) or of a platform that translates in an
+operation mode (Tsai's 3-UPU, through the mode's chart of
+:mod:`optkin.analysis.fixed_orientation`) a surface in (x, y, z). It is
 traced here section by section: the curves of :func:`optkin.singular_curves` at
 ``slices`` values of the third coordinate (phi for ``space="task"``, z for a translational
 platform, the first actuated joint for ``space="joint"``), every point a corrected point
@@ -166,8 +168,13 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
     Parameters
     ----------
     mech : Mechanism
-        A 3-DoF planar platform with distance legs, or a translational spatial platform
-        whose legs are distance legs with closed-form inverses (the Delta).
+        A 3-DoF planar platform with distance legs, a translational spatial platform
+        whose legs are distance legs with closed-form inverses (the Delta), or a spatial
+        platform with three actuators that translates in an operation mode with the
+        identity orientation (Tsai's 3-UPU: sections of that mode's chart, see
+        :mod:`optkin.analysis.fixed_orientation`; ``bounds`` default to +-2 mechanism
+        sizes, ``range`` to z in (0.1, 2) sizes; the mode is entered by
+        :func:`optkin.inverse` at the first section's centre).
     space : "task" or "joint"
         (x, y, phi), sections at fixed phi over [-pi, pi) (a translational platform:
         (x, y, z), sections at fixed z over the legs' reach); or the actuated joints,
@@ -230,6 +237,16 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
     turn = [n for n, a in zip(model.x_names, model.x_angle) if a]
     tchart = None if turn else translational_chart(model)
     spatial = tchart is not None
+    # a spatial platform with passive joints among its unknowns (Tsai's 3-UPU): sections of
+    # its translational mode through the chart p -> configuration
+    kept = (not spatial and model.na == 3 and model.platform is not None
+            and model.platform.space_dim == 3 and model.nx > 3)
+    if kept:
+        if space != "task":
+            raise MechanismError(f"singular_surfaces: {mech.name} translates in space: its "
+                                 "surface is traced in the task space (x, y, z); use "
+                                 "space='task'")
+        return _kept_orientation(mech, model, opts, num, deadline, t0, span)
     if model.na != 3 or model.nx != 3 or (len(turn) != 1 and not spatial):
         raise MechanismError(f"singular_surfaces: {mech.name} is not a 3-DoF planar "
                              "platform (three actuators; unknowns x, y and one orientation) "
@@ -260,7 +277,6 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
         # the section plane (the other two actuated joints), then the sectioning joint
         plane, cols = "joint", [1, 2, 0]
         names = (names_all[1], names_all[2], names_all[0])
-    L = float(model.length)
     secs: list[list[tuple[np.ndarray, np.ndarray, bool, np.ndarray]]] = []
     failed = []
     late = False
@@ -282,31 +298,101 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
                             bounds=bounds, step=step, cusps=False)
         if not c.success:
             failed.append((float(val), c.message))
-        pieces = []
-        for cv in c.curves:
-            keep = np.ones(len(cv.v), dtype=bool)
-            for j, (a, b) in lim.items():
-                keep &= (cv.v[:, j] >= a) & (cv.v[:, j] <= b)
-            wm = None if cv.working_mode is None else np.asarray(cv.working_mode, dtype=int)
-            # the runs within the strokes and in one working mode (a curve through a serial
-            # singularity, as a Delta's do, passes from one sheet of the surface to another)
-            change = np.zeros(len(cv.v), dtype=bool)
-            if wm is not None and len(wm) > 1:
-                change[1:] = np.any(wm[1:] != wm[:-1], axis=1)
-            if keep.all() and not change.any():
-                pieces.append((cv.v[:, cols], cv.v, cv.closed, cv.residual,
-                               None if wm is None else tuple(wm[0].tolist())))
+        secs.append(_pieces(c.curves, lim, cols))
+    return _mesh(mech, model, space, names, values, secs, failed, late, planes, patches,
+                 link, t0)
+
+
+def _kept_orientation(mech: Mechanism, model: Any, opts: dict, num: Any, deadline: Any,
+                      t0: float, span: tuple[float, float] | None) -> SingularSurface:
+    """singular_surfaces of a spatial platform that translates in an operation mode (its
+    orientation kept at the identity; the sections of
+    :mod:`optkin.analysis.fixed_orientation`)."""
+    from .aspects import _limit_map
+    from .continuation import _bounds_arg, _names_of
+    from .fixed_orientation import fixed_orientation, section_curves
+
+    who = "singular_surfaces"
+    L = float(model.length)
+    lim = _limit_map(mech, _names_of(mech), opts["limits"])
+    box = (np.array([[-2 * L, 2 * L], [-2 * L, 2 * L]]) if opts["bounds"] is None
+           else _bounds_arg(opts["bounds"], "workspace"))
+    lo, hi = span if span is not None else (0.1 * L, 2 * L)
+    values = np.linspace(lo, hi, int(num("slices", integer=True, lo=2)) + 2)[1:-1]
+    step = float(num("step", lo=0.0, lo_open=True))
+    link = float(num("link", lo=0.0, lo_open=True))
+    na = model.na
+    names = tuple(model.x_names[:3])
+    # the mode's chart, entered at the first section's centre with the identity orientation
+    from ..solvers.inverse import inverse
+
+    T = np.eye(4)
+    T[:2, 3] = box.mean(axis=1)
+    T[2, 3] = values[0]
+    sols = inverse(mech, T)
+    if not len(sols):
+        raise MechanismError(
+            f"{who}: {mech.name} has no configuration with its platform at "
+            f"{T[:3, 3].tolist()} and the identity orientation (inverse: {sols.message}); "
+            "give bounds and range around a reachable position")
+    v = np.r_[sols[0].qa, sols[0].x]
+    ch = fixed_orientation(mech, model, v)
+    secs: list[list[tuple]] = []
+    failed: list[tuple[float, str]] = []
+    late = False
+    for val in values:
+        if deadline.expired():
+            late = True
+            secs.append([])
+            continue
+        curves, v_next = section_curves(ch, float(val), v, box, hmax=step)
+        if v_next is None:
+            failed.append((float(val), f"the mode's chart did not reach the section at "
+                                       f"{names[2]} = {val:.6g}"))
+            secs.append([])
+            continue
+        v = v_next
+        secs.append(_pieces(curves, lim, [na, na + 1, na + 2]))
+    return _mesh(mech, model, "task", names, values, secs, failed, late, [], [], link, t0)
+
+
+def _pieces(curves: Any, lim: dict, cols: list[int]) -> list[tuple]:
+    """The runs of traced curves (each with ``v``, ``closed``, ``residual`` and
+    ``working_mode``) within the strokes ``lim`` and in one working mode, as (points in the
+    surface's coordinates, configurations, closed, residual, working mode)."""
+    pieces = []
+    for cv in curves:
+        keep = np.ones(len(cv.v), dtype=bool)
+        for j, (a, b) in lim.items():
+            keep &= (cv.v[:, j] >= a) & (cv.v[:, j] <= b)
+        wm = None if cv.working_mode is None else np.asarray(cv.working_mode, dtype=int)
+        # the runs within the strokes and in one working mode (a curve through a serial
+        # singularity, as a Delta's do, passes from one sheet of the surface to another)
+        change = np.zeros(len(cv.v), dtype=bool)
+        if wm is not None and len(wm) > 1:
+            change[1:] = np.any(wm[1:] != wm[:-1], axis=1)
+        if keep.all() and not change.any():
+            pieces.append((cv.v[:, cols], cv.v, cv.closed, cv.residual,
+                           None if wm is None else tuple(wm[0].tolist())))
+            continue
+        start = 0
+        for k in range(1, len(cv.v) + 1):
+            if k < len(cv.v) and keep[k] and keep[k - 1] and not change[k]:
                 continue
-            start = 0
-            for k in range(1, len(cv.v) + 1):
-                if k < len(cv.v) and keep[k] and keep[k - 1] and not change[k]:
-                    continue
-                if keep[start] and k - start >= 2:
-                    pieces.append((cv.v[start:k][:, cols], cv.v[start:k], False,
-                                   cv.residual[start:k],
-                                   None if wm is None else tuple(wm[start].tolist())))
-                start = k
-        secs.append(pieces)
+            if keep[start] and k - start >= 2:
+                pieces.append((cv.v[start:k][:, cols], cv.v[start:k], False,
+                               cv.residual[start:k],
+                               None if wm is None else tuple(wm[start].tolist())))
+            start = k
+    return pieces
+
+
+def _mesh(mech: Mechanism, model: Any, space: str, names: tuple, values: np.ndarray,
+          secs: list, failed: list, late: bool, planes: list, patches: list, link: float,
+          t0: float) -> SingularSurface:
+    """The sections' pieces stitched into one mesh (see the module docstring)."""
+    na = model.na
+    L = float(model.length)
     # vertices
     verts, full, res, index = [], [], [], []
     n = 0
@@ -380,6 +466,8 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
     return SingularSurface(mech.name, space, names, V, Vf, T, R, np.asarray(values),
                            open_curves, ok, status, msg,
                            time.perf_counter() - t0, planes=planes)
+
+
 
 
 def _span(v: Any, who: str) -> tuple[float, float]:
