@@ -37,6 +37,21 @@ def _platform_configs(m, poses):
     return out
 
 
+def _regular(m, draw, attempts: int = 50):
+    """A configuration at actuated values ``draw()`` whose W_p is well conditioned (smallest
+    singular value above 1e-2 of the largest): near a singular one (the SR400's
+    parallelogram nearly flat, at theta5 ~ 0) the passive joints are known only to
+    cond(W_p) times the closure's rounding, 1e-11 there, which second differences at
+    h = 5e-4 turn into 1e-4 (seen: 9 of 60 random rates failed the 1e-5 tolerance)."""
+    for _ in range(attempts):
+        r = optkin.forward(m, draw(), tol=1e-13)
+        if r.success:
+            s = np.linalg.svd(optkin.jacobians(m, r).W_p, compute_uv=False)
+            if s[-1] > 1e-2 * s[0]:
+                return r
+    raise AssertionError(f"{m.name}: no well-conditioned configuration in {attempts} draws")
+
+
 def _akr_configuration(m, rng):
     """A closed AKR-3000 configuration from the numpy tree: the cylinder lengths are the
     distances between the ends they join (frames 3 -> 13 and 4 -> 14)."""
@@ -82,7 +97,7 @@ def _cases():
     m = M.four_bar(1.0, 2.0, 2.0, 2.5)
     cases.append(("four_bar", m, [optkin.forward(m, [t], tol=1e-13) for t in (0.3, 1.0, 2.5)]))
     m = M.sr400()
-    cases.append(("sr400", m, [optkin.forward(m, RNG.uniform(-0.5, 0.5, 6), tol=1e-13)
+    cases.append(("sr400", m, [_regular(m, lambda: RNG.uniform(-0.5, 0.5, 6))
                                for _ in range(3)]))
     m = M.akr3000()
     cases.append(("akr3000", m, [_akr_configuration(m, RNG) for _ in range(3)]))
