@@ -28,14 +28,19 @@ from optkin.solvers import homotopy as H
 
 def _compiled(mech) -> None:
     """Wait for the topology's tracker and system libraries (built in the background on
-    first use, the interpreted Functions running meanwhile): the figures are the compiled
-    code's (the system switches at its next evaluation)."""
+    first use, the interpreted Functions running meanwhile) and, for larger systems, the
+    tracker's SIMD lanes library: the figures are the compiled code's (the system switches
+    at its next evaluation)."""
     tr = H._tracker(get_model(mech))
     if tr is not None and tr._pending is not None:
         tr._pending.wait()
         tr._poll()
     if tr is not None and tr.sys._pending is not None:
         tr.sys._pending.wait()
+    if tr is not None:  # larger systems: the SIMD lanes' library too (started just now)
+        tr._lanes_fn()
+        if tr._lanes is not None and not isinstance(tr._lanes, dict):
+            tr._lanes.wait()
 
 
 def _start_time(mech) -> float:

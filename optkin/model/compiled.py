@@ -457,19 +457,28 @@ _BUILDERS: list[subprocess.Popen] = []  # kept referenced until they end (no war
 
 
 def _start_builder(cc: str, d: Path, path: Path, tag: str, key: str,
-                   funcs: Sequence[ca.Function], wait: bool = False) -> subprocess.Popen:
+                   funcs: Sequence[ca.Function], wait: bool = False,
+                   source: Any = None, flags: Sequence[str] | None = None
+                   ) -> subprocess.Popen:
     """Generate the C code of ``funcs`` (in this thread) into a fresh build directory of
-    ``d`` and start the builder on it (the lock of ``path`` must be this process's)."""
+    ``d`` and start the builder on it (the lock of ``path`` must be this process's).
+    ``source``: a callable giving the C text to compile instead of CasADi's code of
+    ``funcs`` (which then only give the signatures to check on loading), compiled with
+    ``flags`` (default the usual ones)."""
     tmp = tempfile.mkdtemp(dir=d, prefix=".build-")
     try:
         src = Path(tmp) / (path.stem + ".c")
-        cg = ca.CodeGenerator(src.name, {"with_header": False})
-        for f in funcs:
-            cg.add(f)
-        cg.generate(tmp + os.sep)
+        if source is None:
+            cg = ca.CodeGenerator(src.name, {"with_header": False})
+            for f in funcs:
+                cg.add(f)
+            cg.generate(tmp + os.sep)
+        else:
+            src.write_text(source(), encoding="utf-8")
         so = Path(tmp) / path.name
         args = {"host": _HOST, "tmp": tmp, "lock": str(_lock_path(path)),
-                "cmd": [cc, *_FLAGS, str(src), "-o", str(so), "-lm"], "so": str(so),
+                "cmd": [cc, *(_FLAGS if flags is None else flags), str(src), "-o", str(so),
+                        "-lm"], "so": str(so),
                 "lib": str(path), "rec": str(_record_path(path)),
                 "record": _record_fields(path, tag, key), "timeout": COMPILE_LIMIT}
         proc = subprocess.Popen(
@@ -713,8 +722,10 @@ class PendingLibrary:
     """
 
     def __init__(self, tag: str, key: str, path: Path, funcs: Sequence[ca.Function],
-                 proc: subprocess.Popen | None = None) -> None:
+                 proc: subprocess.Popen | None = None, source: Any = None,
+                 flags: Sequence[str] | None = None) -> None:
         self.tag, self.key, self.path, self.funcs = tag, key, path, list(funcs)
+        self.source, self.flags = source, flags
         self._proc = proc
         self._out: dict[str, ca.Function] | bool | None = None
         self._next_look = 0.0
@@ -743,7 +754,7 @@ class PendingLibrary:
         if lib is not None:
             self._out = lib
         elif gone:  # the other process gave up: build it here
-            nxt = start_library(self.tag, self.funcs)
+            nxt = start_library(self.tag, self.funcs, self.source, self.flags)
             if isinstance(nxt, dict):
                 self._out = nxt
             elif nxt is None:
@@ -775,14 +786,17 @@ class PendingLibrary:
                 time.sleep(min(left, 0.02))
 
 
-def start_library(tag: str, funcs: Sequence[ca.Function]
+def start_library(tag: str, funcs: Sequence[ca.Function], source: Any = None,
+                  flags: Sequence[str] | None = None
                   ) -> dict[str, ca.Function] | PendingLibrary | None:
     """:func:`library` without waiting for the compiler: the cached library when there is
     one, else a :class:`PendingLibrary` whose builder runs in the background (or that
     waits for another process building the same library), else None (compiling off, no
     cache directory, no compiler, or the C code could not be generated). The caller keeps
     using the interpreted Functions until :meth:`PendingLibrary.poll` gives the compiled
-    ones."""
+    ones. ``source`` and ``flags``: as :func:`_start_builder` (C of our own; the ``tag``
+    must then name everything that source depends on, the flags included: the key is made
+    of the tag and ``funcs``)."""
     if compile_mode() == "off":
         return None
     d = cache_dir()
@@ -797,14 +811,14 @@ def start_library(tag: str, funcs: Sequence[ca.Function]
     if cc is None:
         return None
     if not _claim(path):
-        return PendingLibrary(tag, key, path, funcs)
+        return PendingLibrary(tag, key, path, funcs, source=source, flags=flags)
     try:
-        proc = _start_builder(cc, d, path, tag, key, funcs)
-    except (OSError, RuntimeError) as exc:
+        proc = _start_builder(cc, d, path, tag, key, funcs, source=source, flags=flags)
+    except (OSError, RuntimeError, ValueError) as exc:
         log.debug("optkin: generating %s failed (%s)", path.stem, exc)
         _release(path)
         return None
-    return PendingLibrary(tag, key, path, funcs, proc)
+    return PendingLibrary(tag, key, path, funcs, proc, source=source, flags=flags)
 
 
 #: Columns of the inner map of :func:`map_shared`.

@@ -635,6 +635,94 @@ class _Tracker:
         self._chunk = _LateCompiled(f"homotopy_track:{sys.key}:{predictor}", chunk)
         #: whether a compiler is (or will be) behind the chunk (False: none available)
         self.compiled = self._chunk.compiled
+        # larger systems: the same chunk for eight paths at once (SIMD lanes,
+        # :mod:`optkin.model.lanes`), built in the background after the chunk; until it
+        # lands (or where it cannot be built) the chunk above serves
+        # (its C is written when a call finds the chunk's own library in: 0.4-1 s once per
+        # machine and topology, then the library is in the cache)
+        self._lanes: Any = None
+        self._lanes_fm: dict[int, Any] = {}
+        # (systems of moderate size only: the C of a step grows as n^3 and with the
+        # system's graph, and gcc's time with it; a 6-6 platform's: 7 unknowns, 3.8k
+        # operations, 36k in the step and polish, compiled in 5-10 s)
+        small_graph = n <= LANES_MAX_N and sys.f_sx.n_instructions() <= LANES_MAX_OPS
+        self._lanes_todo = ((chunk, int(4 * nth + 2 + n)) if fused and self.compiled
+                            and LANES_ON and small_graph else None)
+
+    def _start_lanes(self, chunk: ca.Function, npar: int) -> Any:
+        """The lanes library of ``chunk`` (:func:`optkin.model.compiled.start_library`:
+        loaded, pending or None)."""
+        from ..model import compiled as cc
+        from ..model import lanes
+
+        cpu = lanes.cpu_key()
+        if cpu is None:
+            return None
+        W = self.width
+        S = ca.MX.sym("state", lanes.LANES, W)
+        ref = ca.Function("homotopy_lanes", [S, ca.MX.sym("par", npar)],
+                          [S, ca.MX.zeros(lanes.LANES, 1)])
+        tag = (f"homotopy_lanes:{self.sys.key}:{cc.fingerprint(chunk)[:16]}:"
+               f"{lanes.source_digest()}:{cpu}:{CHUNK}:{' '.join(lanes.FLAGS)}")
+
+        def source() -> str:
+            fns = {f.name(): f for f in chunk.find_functions()}
+            return lanes.chunk_source("homotopy_lanes", fns["homotopy_live_step"],
+                                      fns["homotopy_polish"], W, npar, CHUNK)
+
+        try:
+            return cc.start_library(tag, [ref], source=source, flags=lanes.FLAGS)
+        except (OSError, RuntimeError, ValueError, KeyError):
+            return None
+
+    def _lanes_fn(self) -> Any:
+        """The lanes Function once its library has landed, else None (its build started
+        once the chunk's own library is in)."""
+        if self._lanes_todo is not None and self._pending is None:
+            todo, self._lanes_todo = self._lanes_todo, None
+            self._lanes = self._start_lanes(*todo)
+        lib = self._lanes
+        if lib is None or isinstance(lib, dict):
+            return None if lib is None else lib["homotopy_lanes"]
+        done = lib.poll()
+        if done is None:
+            return None
+        self._lanes = done if done is not False else None
+        return self._lanes_fn()
+
+    def _call_lanes(self, f: Any, S: np.ndarray, act: np.ndarray, par: np.ndarray,
+                    threads: int) -> None:
+        """One lanes chunk of the paths ``act`` (rows of ``S`` updated in place), eight a
+        call; the calls shared among ``threads`` threads, each with buffers of its own.
+        The last block is filled with stopped copies of its first path (left as they are)."""
+        from ..model.compiled import FastFn
+        from ..model.lanes import LANES
+
+        n = self.n
+        blocks = [act[i:i + LANES] for i in range(0, act.size, LANES)]
+        k = max(1, min(int(threads), len(blocks)))
+
+        def run(part: int) -> None:
+            fm = self._lanes_fm.get(part)
+            if fm is None or fm.f is not f:
+                fm = self._lanes_fm[part] = FastFn(f)
+            for blk in blocks[part::k]:
+                X = S[blk]
+                if len(blk) < LANES:
+                    pad = np.repeat(X[:1], LANES - len(blk), 0)
+                    pad[:, 2 * n + _ST] = 3
+                    X = np.vstack([X, pad])
+                out, _ = fm(np.ascontiguousarray(X.T).ravel(), par)
+                S[blk] = out.reshape(self.width, LANES).T[:len(blk)]
+
+        if k == 1:
+            run(0)
+            return
+        pool = self._threads(k - 1)
+        futures = [pool.submit(run, part) for part in range(1, k)]
+        run(0)
+        for fu in futures:
+            fu.result()
 
     @property
     def _pending(self) -> Any:
@@ -654,6 +742,11 @@ class _Tracker:
         paths in ``threads`` shares evaluated at once, each through call buffers of its
         own (the compiled code releases the GIL). Returns the fused condition numbers."""
         W = self.width
+        lf = (self._lanes_fn() if self._lanes is not None or self._lanes_todo is not None
+              else None)
+        if lf is not None:
+            self._call_lanes(lf, S, act, par, threads)
+            return np.full(act.size, np.inf)
         # (threads only once the compiled chunk is in: the interpreted one may fail and
         # wait for it)
         shares = _shares(act.size, threads if self._pending is None else 1)
@@ -740,6 +833,13 @@ class _Tracker:
 #: benchmark's) in 51.9 steps a path instead of 58.2, 36.5-38.2 ms against 41.6-48.4 ms
 #: on one thread, the same modes on all 30; for RK4 (the 3-RPR) it changed nothing.
 STEP_TARGET: dict[str, float | None] = {"hermite": 5e-3, "rk4": None}
+
+#: Whether larger systems are tracked by SIMD lanes once their library is built
+#: (``OPTKIN_LANES=0`` turns it off: CasADi's compiled chunk only).
+LANES_ON = __import__("os").environ.get("OPTKIN_LANES", "1").strip() not in ("0", "off", "no")
+
+#: Largest systems given SIMD lanes: unknowns, and operations of the complex system.
+LANES_MAX_N, LANES_MAX_OPS = 8, 6000
 
 #: Fewest paths a thread is given (below, one call on all of them is faster than the
 #: threads' hand-over).
