@@ -158,8 +158,9 @@ def test_homotopy_stewart_random_30(benchmark):
     """30 random generic 6-6 platforms (the tests' generator: joints on circles, nearly
     planar, legs from a random pose), each warm: the homotopy with its default threads
     (``"auto"``: the usable CPUs, at least 8 paths a thread) and with one thread, beside
-    the multistart (its default, one thread) on the same instances. The benchmark's own
-    figure is the whole batch with the defaults."""
+    the multistart (its default, one thread) on the same instances, and with one thread
+    without the SIMD lanes library (CasADi's compiled chunk: ``lanes_speedup_1thread``).
+    The benchmark's own figure is the whole batch with the defaults."""
     from scipy.spatial.transform import Rotation
 
     from optkin.limits import auto_threads
@@ -193,6 +194,13 @@ def test_homotopy_stewart_random_30(benchmark):
     auto = each(method="homotopy")
     one = each(method="homotopy", threads=1)
     multi = each(method="multistart")
+    tr = H._tracker(get_model(inst[0][0]))  # the same without the SIMD lanes library
+    saved = tr._lanes, tr._lanes_todo
+    tr._lanes, tr._lanes_todo = None, None
+    try:
+        chunk_one = each(method="homotopy", threads=1)
+    finally:
+        tr._lanes, tr._lanes_todo = saved
     benchmark.pedantic(lambda: [optkin.assembly_modes(m, L, method="homotopy")
                                 for m, L in inst], rounds=3, iterations=1)
     record(benchmark, float(np.sum(multi)), "multistart, per instance, summed",
@@ -201,4 +209,7 @@ def test_homotopy_stewart_random_30(benchmark):
            homotopy_1thread_median_s=float(np.median(one)),
            multistart_median_s=float(np.median(multi)),
            median_ratio_multistart=float(np.median(multi) / np.median(auto)),
-           median_ratio_multistart_1thread=float(np.median(multi) / np.median(one)))
+           median_ratio_multistart_1thread=float(np.median(multi) / np.median(one)),
+           lanes=saved[0] is not None,
+           chunk_1thread_median_s=float(np.median(chunk_one)),
+           lanes_speedup_1thread=float(np.median(chunk_one) / np.median(one)))
