@@ -386,10 +386,13 @@ def test_dask_tasks_of_several_units_fail_only_the_bad_unit(small: Path, tmp_pat
     (small / "zz_bad.toml").write_text('schema_version = 1\nname = "bad"\n[mechanism]\n'
                                        'type = "library"\nname = "no_such_mechanism"\n'
                                        '[[task]]\nkind = "forward"\nqa = [1.0]\n')
-    (small / "zz_slow.toml").write_text(  # aspects take 0.5 s: the worker is killed
+    # aspects at step 0.01 take about 2 s here, far past the 0.02 s limit and the 0.5 s of
+    # grace before the worker is killed (at the default step, 0.45-0.5 s: they could end
+    # within the grace, and did on a fast day)
+    (small / "zz_slow.toml").write_text(
         'schema_version = 1\nname = "slow"\n[mechanism]\ntype = "library"\n'
         'name = "five_bar"\nargs = { L0 = 8.0, L1 = 7.0, L2 = 5.0, L3 = 5.0, L4 = 7.0 }\n'
-        '[[task]]\nkind = "aspects"\ntime_limit = 0.02\n'
+        '[[task]]\nkind = "aspects"\ntime_limit = 0.02\noptions = { step = 0.01 }\n'
         '[[task]]\nkind = "forward"\nqa = [1.0, 2.0]\n')
     assert main(["run", str(small), "--out", str(tmp_path / "serial"), "--no-pictures"]) == 2
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
