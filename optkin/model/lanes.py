@@ -27,8 +27,8 @@ from typing import Any
 
 import casadi as ca
 
-__all__ = ["LANES", "kernel", "chunk_source", "function_source", "lanes_function", "cpu_key",
-           "FLAGS"]
+__all__ = ["LANES", "kernel", "single_sx", "chunk_source", "function_source",
+           "lanes_function", "cpu_key", "FLAGS"]
 
 #: Points per vector (doubles in 64 bytes).
 LANES = 8
@@ -38,7 +38,7 @@ MAX_OPS = 80_000
 
 #: Compiler flags of a lanes library: the vectors of the machine that builds it (the cache
 #: key holds :func:`cpu_key`, so another machine sharing the cache builds its own).
-FLAGS = ("-O1", "-march=native", "-shared", "-fPIC")
+FLAGS = ("-O1", "-march=native", "-ffp-contract=off", "-shared", "-fPIC")
 
 _HEADER = r"""/* optkin lanes: generated, do not edit */
 #include <string.h>
@@ -136,13 +136,21 @@ def kernel(f: ca.Function, name: str, shared: Sequence[int] = ()) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _cse(f: ca.Function) -> ca.Function:
-    """``f`` as one SX graph with its common subexpressions merged."""
+def single_sx(f: ca.Function, name: str | None = None) -> ca.Function:
+    """``f`` as one SX graph (an MX Function expanded: its calls inlined, its branches
+    selects) with its common subexpressions merged: the operations :func:`kernel` writes,
+    for CasADi's own evaluation to match them."""
     g = f if f.is_a("SXFunction") else f.expand()
     ins = g.sx_in()
     outs = g(*ins)
     outs = [outs] if isinstance(outs, ca.SX) else list(outs)
-    return ca.Function(f.name() + "_sx", ins, outs, {"cse": True})
+    return ca.Function(name or f.name() + "_sx", ins, outs, {"cse": True})
+
+
+def _cse(f: ca.Function) -> ca.Function:
+    """``f`` as :func:`single_sx` gives it (an SX Function with merged subexpressions is
+    taken as it is)."""
+    return f if f.is_a("SXFunction") else single_sx(f)
 
 
 def chunk_source(name: str, step: ca.Function, polish: ca.Function, width: int, npar: int,

@@ -422,6 +422,11 @@ class _Tracker:
         # the second Newton update's factorisation also gives the Hermite tangent (at the
         # point before that update, close to the accepted one)
         fused = predictor == "hermite" and n > SMALL
+        # SIMD lanes for systems of moderate size only (the C of a step grows as n^3 and
+        # with the system's graph, and gcc's time with it; a 6-6 platform's: 7 unknowns,
+        # 3.8k operations, 36k in the step and polish, compiled in 5-10 s)
+        lanes_ok = (fused and LANES_ON and n <= LANES_MAX_N
+                    and sys.f_sx.n_instructions() <= LANES_MAX_OPS)
         # a step is accepted when the last Newton update is this small (relative): 1e-6
         # for small systems; 1e-4 for the fused ones, whose quadratic convergence puts the
         # point itself within ~1e-8 by then (a 6-6 platform's 40 paths 1.3x faster; the
@@ -567,7 +572,10 @@ class _Tracker:
             else:  # the step that would have made the first update `target` (local error
                 # ~ h^order), within a factor 2 either way
                 order = 4 if hermite else 5
-                ratio = (target / ca.fmax(first, 1e-300)) ** (1.0 / order)
+                q = target / ca.fmax(first, 1e-300)
+                # (the fourth root as two square roots: the SIMD lanes' code computes
+                # exactly this, where pow(q, 0.25) may differ in the last bit)
+                ratio = ca.sqrt(ca.sqrt(q)) if order == 4 else q ** (1.0 / order)
                 hgrow = ca.fmin(h * ca.fmin(ca.fmax(ratio, 0.5), 2.0), hmax)
             h1 = ca.if_else(run, ca.if_else(accept, hgrow, 0.5 * h), h)
             far = ca.mmax(absc(X1) / sc) > big
@@ -615,6 +623,15 @@ class _Tracker:
             # a call can hold many steps without paying them for the paths already done
             live = ca.Function("homotopy_live_step", [ms, mp], [ca.if_else(
                 ms[2 * n + _ST] == 0, step(ms, mp), ms, True)])
+            if lanes_ok:
+                # the step and the polish as single SX graphs (their branches selects,
+                # common subexpressions merged): the very operations the SIMD lanes'
+                # library evaluates (:meth:`_start_lanes`), so that this chunk, interpreted
+                # or compiled, and the lanes give the same numbers to the bit
+                from ..model.lanes import single_sx
+
+                live, polish = (single_sx(live, "homotopy_live_sx"),
+                                single_sx(polish, "homotopy_polish_sx"))
             last = live.fold(CHUNK)(ms, ca.repmat(mp, 1, CHUNK))
             return ca.Function("homotopy_chunk", [ms, mp], polish(last, mp))
 
@@ -622,7 +639,7 @@ class _Tracker:
         # kept serialized in the cache, read back in a few ms by the next process
         chunk = cc.memo_function("homotopy_chunk", [
             cc.fingerprint(sys.f_sx), repr((h0, hmax, hmin, big, accept_tol, grow, sx, newton,
-                                         predictor, CHUNK, target)), _source_digest()], build)
+                                         predictor, CHUNK, target, lanes_ok)), _source_digest()], build)
 
         # compiled in the background: until the library is ready (about a second), runs
         # use the interpreted chunk (a 3-RPR's call 11 ms instead of 1.4 ms, a 6-6
@@ -642,12 +659,8 @@ class _Tracker:
         # machine and topology, then the library is in the cache)
         self._lanes: Any = None
         self._lanes_fm: dict[int, Any] = {}
-        # (systems of moderate size only: the C of a step grows as n^3 and with the
-        # system's graph, and gcc's time with it; a 6-6 platform's: 7 unknowns, 3.8k
-        # operations, 36k in the step and polish, compiled in 5-10 s)
-        small_graph = n <= LANES_MAX_N and sys.f_sx.n_instructions() <= LANES_MAX_OPS
-        self._lanes_todo = ((chunk, int(4 * nth + 2 + n)) if fused and self.compiled
-                            and LANES_ON and small_graph else None)
+        self._lanes_todo = ((chunk, int(4 * nth + 2 + n)) if lanes_ok and self.compiled
+                            else None)
 
     def _start_lanes(self, chunk: ca.Function, npar: int) -> Any:
         """The lanes library of ``chunk`` (:func:`optkin.model.compiled.start_library`:
@@ -667,8 +680,8 @@ class _Tracker:
 
         def source() -> str:
             fns = {f.name(): f for f in chunk.find_functions()}
-            return lanes.chunk_source("homotopy_lanes", fns["homotopy_live_step"],
-                                      fns["homotopy_polish"], W, npar, CHUNK)
+            return lanes.chunk_source("homotopy_lanes", fns["homotopy_live_sx"],
+                                      fns["homotopy_polish_sx"], W, npar, CHUNK)
 
         try:
             return cc.start_library(tag, [ref], source=source, flags=lanes.FLAGS)
