@@ -81,9 +81,11 @@ def _platforms(n, seed):
 
 
 @needs_lanes
-def test_the_lanes_tracker_ends_every_path_where_the_compiled_chunk_does():
+def test_the_lanes_tracker_ends_every_path_where_the_chunk_does():
     """Three random 6-6 platforms, the same start system and gamma: the 40 endpoints of the
-    lanes library (8 paths a call, the last call padded) against CasADi's compiled chunk."""
+    lanes library (8 paths a call, the last call padded) against CasADi's evaluation of the
+    same chunk (its interpreted Function, or its compiled one where the cache holds it): the
+    same to the bit."""
     plats = _platforms(3, 21)
     m0 = plats[0][0]
     optkin.assembly_modes(m0, plats[0][1], method="homotopy")  # start system, chunk

@@ -100,12 +100,26 @@ class _LateCompiled:
     until its library lands the interpreted Function answers; its maps (through call
     buffers, one per width) are rebuilt once when the compiled code takes over."""
 
-    def __init__(self, tag: str, f: ca.Function) -> None:
+    def __init__(self, tag: str, f: ca.Function, build: bool = True) -> None:
         from ..model import compiled as cc
 
         self.f = f
+        self.tag = tag
         self.pending: Any = None
         self._maps: dict[int, Any] = {}
+        #: whether its build is yet to be started (``build=False``: a cached library is
+        #: loaded, none is built until :meth:`start`)
+        self.deferred = False
+        if not build:
+            lib = cc.library(tag, [f], build=False)
+            if lib is not None:
+                self.f = lib[f.name()]
+                self.compiled = True
+                return
+            self.deferred = True
+            self.compiled = (cc.compile_mode() != "off" and cc.cache_dir() is not None
+                             and cc.find_compiler() is not None)
+            return
         lib = cc.start_library(tag, [f])
         if isinstance(lib, dict):
             self.f = lib[f.name()]
@@ -113,6 +127,20 @@ class _LateCompiled:
             self.pending = lib
         #: whether a compiler is (or will be) behind it (False: none available)
         self.compiled = lib is not None
+
+    def start(self) -> None:
+        """Start the build deferred at construction (nothing when there is none)."""
+        from ..model import compiled as cc
+
+        if not self.deferred:
+            return
+        self.deferred = False
+        lib = cc.start_library(self.tag, [self.f])
+        if isinstance(lib, dict):
+            self.f = lib[self.f.name()]
+            self._maps = {}
+        elif lib is not None:
+            self.pending = lib
 
     def poll(self) -> None:
         """Switch to the compiled Function once its build has finished."""
@@ -649,7 +677,15 @@ class _Tracker:
         # compiled code does not (CasADi's QR solver raises on an exactly singular matrix,
         # the compiled one gives inf or NaN, which the step's guards handle): such a call
         # waits for the library and is made again from the same state (:meth:`run`)
-        self._chunk = _LateCompiled(f"homotopy_track:{sys.key}:{predictor}", chunk)
+        # with SIMD lanes to come, CasADi's compiled chunk is not built (11 s of gcc for a
+        # 6-6 platform) unless the lanes' build fails: the interpreted chunk (the same
+        # operations, 0.18 s a call) answers until the lanes land (a cached library of it
+        # is loaded all the same)
+        from ..model import lanes as _lanes
+
+        defer = lanes_ok and _lanes.cpu_key() is not None
+        self._chunk = _LateCompiled(f"homotopy_track:{sys.key}:{predictor}", chunk,
+                                    build=not defer)
         #: whether a compiler is (or will be) behind the chunk (False: none available)
         self.compiled = self._chunk.compiled
         # larger systems: the same chunk for eight paths at once (SIMD lanes,
@@ -689,13 +725,16 @@ class _Tracker:
             return None
 
     def _lanes_fn(self) -> Any:
-        """The lanes Function once its library has landed, else None (its build started
-        once the chunk's own library is in)."""
+        """The lanes Function once its library has landed, else None (its build is started
+        by the first call that finds nothing being compiled for the chunk; where it cannot
+        be built, CasADi's compiled chunk is built instead)."""
         if self._lanes_todo is not None and self._pending is None:
             todo, self._lanes_todo = self._lanes_todo, None
             self._lanes = self._start_lanes(*todo)
         lib = self._lanes
         if lib is None or isinstance(lib, dict):
+            if lib is None:
+                self._chunk.start()  # no lanes: CasADi's compiled chunk after all
             return None if lib is None else lib["homotopy_lanes"]
         done = lib.poll()
         if done is None:
