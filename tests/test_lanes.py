@@ -12,7 +12,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
+from test_homotopy import _random_stewart_platforms
 
 import optkin
 from optkin.model import compiled as cc
@@ -66,27 +66,13 @@ def test_an_unknown_operation_is_refused():
         lanes.kernel(ca.Function("f", [x], [x ** 0.3]), "k")
 
 
-def _platforms(n, seed):
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(n):
-        ab, ap = np.sort(rng.uniform(0, 2 * np.pi, 6)), np.sort(rng.uniform(0, 2 * np.pi, 6))
-        A = np.c_[np.cos(ab), np.sin(ab), rng.uniform(-0.1, 0.1, 6)]
-        B = 0.5 * np.c_[np.cos(ap), np.sin(ap), rng.uniform(-0.1, 0.1, 6)]
-        p = np.r_[rng.uniform(-0.1, 0.1, 2), rng.uniform(0.8, 1.2)]
-        R = Rotation.from_rotvec(rng.uniform(-0.15, 0.15, 3)).as_matrix()
-        out.append((optkin.mechanisms.stewart_gough(A, B),
-                    np.linalg.norm(p + B @ R.T - A, axis=1)))
-    return out
-
-
 @needs_lanes
 def test_the_lanes_tracker_ends_every_path_where_the_chunk_does():
     """Three random 6-6 platforms, the same start system and gamma: the 40 endpoints of the
     lanes library (8 paths a call, the last call padded) against CasADi's evaluation of the
     same chunk (its interpreted Function, or its compiled one where the cache holds it): the
     same to the bit."""
-    plats = _platforms(3, 21)
+    plats = list(_random_stewart_platforms(3, 21))
     m0 = plats[0][0]
     optkin.assembly_modes(m0, plats[0][1], method="homotopy")  # start system, chunk
     tr = H._tracker(get_model(m0))
