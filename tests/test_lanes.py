@@ -4,7 +4,7 @@ Evidence: every operation the writer knows, evaluated at eight points per call, 
 CasADi's own evaluation of the same Function point by point (NaN, infinities and ties
 included, where fmin/fmax, comparisons and the logical operations have their corner
 cases); and the homotopy tracker run through its lanes library against the same tracker
-through CasADi's compiled chunk, on random 6-6 platforms.
+through CasADi's evaluation of the same chunk, on random 6-6 platforms: equal to the bit.
 """
 
 from __future__ import annotations
