@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import MechanismError
 
-__all__ = ["FixedOrientation", "fixed_orientation"]
+__all__ = ["FixedOrientation", "fixed_orientation", "section_curves"]
 
 
 @dataclass
@@ -147,7 +147,7 @@ def _correct(ch, z, xy, n, v0, g0, dg, tol, hcap):
     return None
 
 
-def _trace(ch, z, xy0, v0, box, hmax, tol, max_steps, known):
+def _trace(ch, z, xy0, v0, box, hmax, tol, max_steps):
     """Both directions from a point of g = 0: (points, configurations, closed)."""
     L = ch.L
     runs = []
@@ -302,7 +302,7 @@ def section_curves(ch: FixedOrientation, z: float, v_start: np.ndarray, box: np.
                     side = 1
             if found is None or near(found[0]):
                 continue
-            out = _trace(ch, z, found[0], found[1], box, hmax, tol, max_steps, traced)
+            out = _trace(ch, z, found[0], found[1], box, hmax, tol, max_steps)
             if out is None:
                 continue
             P, V, closed = out

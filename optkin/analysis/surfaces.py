@@ -241,20 +241,17 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
     # its translational mode through the chart p -> configuration
     kept = (not spatial and model.na == 3 and model.platform is not None
             and model.platform.space_dim == 3 and model.nx > 3)
+    if (spatial or kept) and space != "task":
+        raise MechanismError(f"singular_surfaces: {mech.name} translates in space: its "
+                             "surface is traced in the task space (x, y, z); use "
+                             "space='task'")
     if kept:
-        if space != "task":
-            raise MechanismError(f"singular_surfaces: {mech.name} translates in space: its "
-                                 "surface is traced in the task space (x, y, z); use "
-                                 "space='task'")
-        return _kept_orientation(mech, model, opts, num, deadline, t0, span)
+        return _kept_orientation(mech, model, opts["limits"], bounds, int(slices),
+                                 float(step), float(link), deadline, t0, span)
     if model.na != 3 or model.nx != 3 or (len(turn) != 1 and not spatial):
         raise MechanismError(f"singular_surfaces: {mech.name} is not a 3-DoF planar "
                              "platform (three actuators; unknowns x, y and one orientation) "
                              "nor a translational one with distance legs (unknowns x, y, z)")
-    if spatial and space != "task":
-        raise MechanismError(f"singular_surfaces: {mech.name} translates in space: its "
-                             "surface is traced in the task space (x, y, z); use "
-                             "space='task'")
     names_all = _names_of(mech)
     lim = _limit_map(mech, names_all, limits)
     na = model.na
@@ -303,24 +300,23 @@ def singular_surfaces(mech: Mechanism, space: str = "task",
                  link, t0)
 
 
-def _kept_orientation(mech: Mechanism, model: Any, opts: dict, num: Any, deadline: Any,
-                      t0: float, span: tuple[float, float] | None) -> SingularSurface:
+def _kept_orientation(mech: Mechanism, model: Any, limits: Any, bounds: Any, slices: int,
+                      step: float, link: float, deadline: Any, t0: float,
+                      span: tuple[float, float] | None) -> SingularSurface:
     """singular_surfaces of a spatial platform that translates in an operation mode (its
     orientation kept at the identity; the sections of
-    :mod:`optkin.analysis.fixed_orientation`)."""
+    :mod:`optkin.analysis.fixed_orientation`); the options already checked."""
     from .aspects import _limit_map
     from .continuation import _bounds_arg, _names_of
     from .fixed_orientation import fixed_orientation, section_curves
 
     who = "singular_surfaces"
     L = float(model.length)
-    lim = _limit_map(mech, _names_of(mech), opts["limits"])
-    box = (np.array([[-2 * L, 2 * L], [-2 * L, 2 * L]]) if opts["bounds"] is None
-           else _bounds_arg(opts["bounds"], "workspace"))
+    lim = _limit_map(mech, _names_of(mech), limits)
+    box = (np.array([[-2 * L, 2 * L], [-2 * L, 2 * L]]) if bounds is None
+           else _bounds_arg(bounds, "workspace"))
     lo, hi = span if span is not None else (0.1 * L, 2 * L)
-    values = np.linspace(lo, hi, int(num("slices", integer=True, lo=2)) + 2)[1:-1]
-    step = float(num("step", lo=0.0, lo_open=True))
-    link = float(num("link", lo=0.0, lo_open=True))
+    values = np.linspace(lo, hi, slices + 2)[1:-1]
     na = model.na
     names = tuple(model.x_names[:3])
     # the mode's chart, entered at the first section's centre with the identity orientation

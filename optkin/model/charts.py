@@ -248,34 +248,31 @@ def translational_chart(model: Any) -> PlanarChart | None:
     None: legs that are all distance legs with one actuator each and closed-form inverses,
     three closure rows, the three translations the only unknowns (the Delta). Its planar
     loci (circles, serial loci, placing a leg's point) do not apply."""
-    plat = model.platform
-    if plat is None or plat.space_dim != 3 or not model.fully_parallel:
-        return None
-    form = model.distance_form()
-    if form is None or not model.nx == model.n_platform == model.m == 3 or any(model.x_angle):
-        return None
-    from .inverse import ClosedPart
-
-    parts = model.inverse_parts()
-    if not all(isinstance(pt, ClosedPart) for pt in parts):
-        return None
-    mech = model.mech
-    return PlanarChart(model=model, n_legs=len(parts),
-                       branches=tuple(int(pt.branches) for pt in parts),
-                       qa_angle=np.array([bool(mech.revolute[i]) for i in mech.active_index]),
-                       length_actuated=np.array(form.length_actuated),
-                       translation=(0, 1, 2), orientation=())
+    return _distance_chart(model, 3)
 
 
 def planar_chart(model: Any) -> PlanarChart | None:
     """The closed-form chart of ``model``, or None: it needs a planar platform whose legs
     are all distance legs in the reduced form with one actuator each (fully parallel), as
     many closure rows as unknowns, and the platform coordinates as the only unknowns."""
+    return _distance_chart(model, 2)
+
+
+def _distance_chart(model: Any, space_dim: int) -> PlanarChart | None:
+    """The chart of a platform moving in ``space_dim`` dimensions whose legs are all
+    distance legs with closed-form inverses, one actuator each, the platform coordinates
+    the only unknowns, as many closure rows: two translations (and any angles) in the
+    plane, three translations and no angle in space; else None."""
     plat = model.platform
-    if plat is None or plat.space_dim != 2 or not model.fully_parallel:
+    if plat is None or plat.space_dim != space_dim or not model.fully_parallel:
         return None
     form = model.distance_form()
     if form is None or model.nx != model.n_platform or model.m != model.nx:
+        return None
+    npl = model.n_platform
+    ang = tuple(i for i in range(npl) if model.x_angle[i])
+    trans = tuple(i for i in range(npl) if not model.x_angle[i])
+    if len(trans) != space_dim or (space_dim == 3 and ang):
         return None
     from .inverse import ClosedPart
 
@@ -283,15 +280,11 @@ def planar_chart(model: Any) -> PlanarChart | None:
     if not all(isinstance(pt, ClosedPart) for pt in parts):
         return None
     mech = model.mech
-    qa_angle = np.array([bool(mech.revolute[i]) for i in mech.active_index], dtype=bool)
-    npl = model.n_platform
-    ang = tuple(i for i in range(npl) if model.x_angle[i])
-    trans = tuple(i for i in range(npl) if not model.x_angle[i])
-    if len(trans) != 2:
-        return None
     return PlanarChart(model=model, n_legs=len(parts),
                        branches=tuple(int(pt.branches) for pt in parts),
-                       qa_angle=qa_angle, length_actuated=np.array(form.length_actuated),
+                       qa_angle=np.array([bool(mech.revolute[i]) for i in mech.active_index],
+                                         dtype=bool),
+                       length_actuated=np.array(form.length_actuated),
                        translation=trans, orientation=ang)
 
 

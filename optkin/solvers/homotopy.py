@@ -60,6 +60,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
+import os
 import time
 import weakref
 from dataclasses import dataclass
@@ -689,10 +690,9 @@ class _Tracker:
         #: whether a compiler is (or will be) behind the chunk (False: none available)
         self.compiled = self._chunk.compiled
         # larger systems: the same chunk for eight paths at once (SIMD lanes,
-        # :mod:`optkin.model.lanes`), built in the background after the chunk; until it
-        # lands (or where it cannot be built) the chunk above serves
-        # (its C is written when a call finds the chunk's own library in: 0.4-1 s once per
-        # machine and topology, then the library is in the cache)
+        # :mod:`optkin.model.lanes`), built in the background from the first call (its C
+        # written then: 0.4-1 s once per machine and topology); until it lands the chunk
+        # above serves, and where it cannot be built that chunk is compiled instead
         self._lanes: Any = None
         self._lanes_fm: dict[int, Any] = {}
         self._lanes_todo = ((chunk, int(4 * nth + 2 + n)) if lanes_ok and self.compiled
@@ -714,14 +714,16 @@ class _Tracker:
         tag = (f"homotopy_lanes:{self.sys.key}:{cc.fingerprint(chunk)[:16]}:"
                f"{lanes.source_digest()}:{cpu}:{CHUNK}:{' '.join(lanes.FLAGS)}")
 
-        def source() -> str:
+        def source() -> str:  # (a ValueError: start_library releases the build lock)
             fns = {f.name(): f for f in chunk.find_functions()}
+            if "homotopy_live_sx" not in fns or "homotopy_polish_sx" not in fns:
+                raise ValueError("lanes: the chunk has no single-SX step and polish")
             return lanes.chunk_source("homotopy_lanes", fns["homotopy_live_sx"],
                                       fns["homotopy_polish_sx"], W, npar, CHUNK)
 
         try:
             return cc.start_library(tag, [ref], source=source, flags=lanes.FLAGS)
-        except (OSError, RuntimeError, ValueError, KeyError):
+        except (OSError, RuntimeError, ValueError):
             return None
 
     def _lanes_fn(self) -> Any:
@@ -888,7 +890,7 @@ STEP_TARGET: dict[str, float | None] = {"hermite": 5e-3, "rk4": None}
 
 #: Whether larger systems are tracked by SIMD lanes once their library is built
 #: (``OPTKIN_LANES=0`` turns it off: CasADi's compiled chunk only).
-LANES_ON = __import__("os").environ.get("OPTKIN_LANES", "1").strip() not in ("0", "off", "no")
+LANES_ON = os.environ.get("OPTKIN_LANES", "1").strip() not in ("0", "off", "no")
 
 #: Largest systems given SIMD lanes: unknowns, and operations of the complex system.
 LANES_MAX_N, LANES_MAX_OPS = 8, 6000
