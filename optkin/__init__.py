@@ -10,6 +10,13 @@ and loads CasADi, cvxpy or matplotlib only when something needs them.
 
 from __future__ import annotations
 
+import sys as _sys
+
+if _sys.argv[:1] == ["-m"]:  # ``python -m optkin``: runpy imports this package first
+    from ._exit import quiet_interrupts as _quiet_interrupts
+
+    _quiet_interrupts()  # a Ctrl-C during these imports ends the command without a traceback
+
 import importlib
 from typing import TYPE_CHECKING, Any
 
@@ -173,3 +180,6 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     from .solvers.batch import BatchResult, forward_batch
     from .solvers.certify import Certificate, certify
     from .solvers.enumerate import WorkingModes, assembly_modes, track, working_modes
+
+if _sys.argv[:1] == ["-m"]:  # (``optkin.__main__`` keeps them quiet until the CLI is in)
+    _quiet_interrupts(False)

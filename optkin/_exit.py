@@ -9,10 +9,11 @@ from __future__ import annotations
 import atexit
 import contextlib
 import os
+import signal
 import sys
 from typing import NoReturn
 
-__all__ = ["fast_exit"]
+__all__ = ["fast_exit", "quiet_interrupts"]
 
 
 def fast_exit(code: int = 0) -> NoReturn:
@@ -29,3 +30,20 @@ def fast_exit(code: int = 0) -> NoReturn:
             with contextlib.suppress(Exception):
                 stream.flush()
         os._exit(code)
+
+
+def _interrupted(signum: int, frame: object) -> None:
+    with contextlib.suppress(Exception):
+        sys.stderr.write("optkin: interrupted\n")
+        sys.stderr.flush()
+    os._exit(130)
+
+
+def quiet_interrupts(on: bool = True) -> None:
+    """While the command line is still importing (``python -m optkin`` imports the package,
+    then its ``__main__``), a Ctrl-C ends the process with status 130 and one line, not a
+    traceback through whatever module was loading; ``on=False`` gives Ctrl-C back to
+    Python (``KeyboardInterrupt``), which the command line handles once it runs. Nothing
+    has been written yet at that point, so nothing is lost."""
+    with contextlib.suppress(ValueError):  # (not the main thread: leave signals alone)
+        signal.signal(signal.SIGINT, _interrupted if on else signal.default_int_handler)
