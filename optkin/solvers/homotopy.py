@@ -9,7 +9,8 @@ trick) and Duff et al. (2019, monodromy), for the closure of any square model:
   Jacobian in x and its derivative along a direction of theta are one CasADi Function,
   made complex by :func:`optkin.model.complexify.complexify` and mapped over the paths.
 * start systems by monodromy. At random complex parameters theta_0 (geometry entries
-  equal to 0, +-pi/2 or +-pi kept: :func:`structural`; c_0 = F(x_0; q_a0, p_0)
+  equal to 0, +-pi/2 or +-pi kept: :func:`structural`; legs' screws kept rigid and the
+  quaternion's norm row without offset: :func:`_keep_rigid`; c_0 = F(x_0; q_a0, p_0)
   for a random complex x_0, which is then a solution by construction), the solutions are
   grown by loops theta_0 -> theta_1 -> theta_2 -> theta_0 through random complex
   parameters: each loop permutes the solutions, and new endpoints are new solutions. The
@@ -248,10 +249,14 @@ class _System(_Base):
         self.h_real = ca.Function("h", [st.x, th], [F - c])
         self._setup(st.x, th, F - c, topo.key, model.x_scale)
         # the angles the system is 2 pi periodic in (a Khalil table's loop-angle row, a
-        # sum of angles, is not): only those are identified modulo 2 pi
+        # sum of angles, is not): only those are identified modulo 2 pi. Tested at the
+        # model's own geometry: random geometry need not be a rigid leg's (w . v != 0 keeps
+        # theta itself in a screw's exponential), and the homotopy's is kept rigid
+        # (:func:`_keep_rigid`)
         rng = np.random.default_rng(0)
         x = rng.normal(size=self.n) + 1j * rng.normal(size=self.n)
         th = rng.normal(size=self.nth) + 1j * rng.normal(size=self.nth)
+        th[self.na:self.na + self.np_] = np.asarray(model.p, dtype=float)[used]
         zero = np.zeros((1, self.nth), complex)
         h0 = self.eval(x[None], th[None], zero)[0][0]
         self.periodic = np.zeros(self.n, bool)
@@ -1161,15 +1166,111 @@ def _structural(model) -> tuple[tuple[int, float], ...]:
     return tuple(zip((sys.na + rows).tolist(), vals.tolist()))
 
 
+@dataclass(frozen=True)
+class _Rigid:
+    """Where a leg's screws and home rotations sit among the homotopy's geometry parameters
+    (positions in ``p_used``; -1 for an entry the closure does not read)."""
+
+    revolute: tuple[tuple[int, ...], ...]  # (w0, w1, w2, v0, v1, v2) of each rotation
+    prismatic: tuple[tuple[int, ...], ...]  # (v0, v1, v2) of each translation
+    home: tuple[int, ...]  # rotation entries of the legs' home poses
+
+
+_RIGID: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _rigid(model) -> _Rigid:
+    out = _RIGID.get(model)
+    if out is None:
+        out = _RIGID[model] = _rigid_slots(model)
+    return out
+
+
+def _rigid_slots(model) -> _Rigid:
+    import re
+
+    sys = _system(model)
+    names = list(getattr(model.mech, "geometry_names", ()))
+    at = {names[int(i)]: k for k, i in enumerate(sys.p_used)} if names else {}
+    p = np.asarray(model.p, dtype=float)
+    rev, pri, home = [], [], []
+    for n in names:
+        m = re.fullmatch(r"(legs\[\d+\]\.)(screws\[\d+\])\[0\]", n)
+        if m:
+            key = m.group(1) + m.group(2)
+            ix = tuple(at.get(f"{key}[{c}]", -1) for c in range(6))
+            w = p[[names.index(f"{key}[{c}]") for c in range(3)]]
+            if np.any(w != 0):
+                rev.append(ix)
+            else:
+                pri.append(ix[3:])
+        m = re.fullmatch(r"legs\[\d+\]\.home\[([012])\]\[([012])\]", n)
+        if m and n in at:
+            home.append(at[n])
+    return _Rigid(tuple(rev), tuple(pri), tuple(home))
+
+
+def _unit(x: np.ndarray, free: list[int]) -> None:
+    """Scale the ``free`` entries of ``x`` so that x . x = 1 (complex, unconjugated)."""
+    fixed = sum(x[c] ** 2 for c in range(3) if c not in free)
+    f = sum(x[c] ** 2 for c in free)
+    if free and abs(f) > 1e-12:
+        x[free] *= np.sqrt((1 - fixed) / f)
+
+
+def _keep_rigid(model, pp: np.ndarray, fixed: set[int]) -> np.ndarray:
+    """Random complex geometry ``pp`` moved back into the family of rigid legs: every
+    revolute screw (w, v) with w . w = 1 and w . v = 0, every prismatic direction with
+    v . v = 1 (complex, unconjugated), changing only entries not in ``fixed``
+    (:func:`structural`); a leg's home rotation keeps its real values. Screws outside that
+    family are not rigid motions, and their exponentials are not 2 pi periodic in the
+    joint angle (the translation keeps a term in theta itself when w . v != 0): the start
+    system of a 3-RPS at joint level had a lattice of solutions theta + 2 pi k / |w|,
+    and monodromy found thousands of them."""
+    rig = _rigid(model)
+    real = np.asarray(model.p, dtype=float)[_system(model).p_used]
+    for ix in rig.revolute:
+        if min(ix) < 0:
+            continue
+        w, v = pp[list(ix[:3])].copy(), pp[list(ix[3:])].copy()
+        _unit(w, [c for c in range(3) if ix[c] not in fixed])
+        fv = [c for c in range(3) if ix[3 + c] not in fixed]
+        g = sum(w[c] ** 2 for c in fv)
+        if fv and abs(g) > 1e-12:
+            v[fv] -= (w @ v) * w[fv] / g
+        pp[list(ix[:3])], pp[list(ix[3:])] = w, v
+    for ix in rig.prismatic:
+        if min(ix) < 0:
+            continue
+        v = pp[list(ix)].copy()
+        _unit(v, [c for c in range(3) if ix[c] not in fixed])
+        pp[list(ix)] = v
+    for k in rig.home:
+        pp[k] = real[k]
+    return pp
+
+
+def _norm_row(model) -> int | None:
+    """The row of the quaternion's norm, if any: its offset stays 0 (with |q|^2 != 1 the
+    platform's rotation formula is no rotation, and the family is no longer rigid)."""
+    names = list(model.row_names)
+    return names.index("quaternion:norm") if "quaternion:norm" in names else None
+
+
 def _random_theta(sys: _System, model, rng, c: np.ndarray | None = None) -> np.ndarray:
     p = np.asarray(model.p, dtype=float)[sys.p_used]
     size = float(model.length)
     qa = size * (rng.normal(size=sys.na) + 1j * rng.normal(size=sys.na))
     pp = p + (np.abs(p) + 0.1 * size) * (rng.normal(size=p.size) + 1j * rng.normal(size=p.size))
-    for k, v in structural(model):
+    pattern = structural(model)
+    for k, v in pattern:
         pp[k - sys.na] = v
+    pp = _keep_rigid(model, pp, {k - sys.na for k, _ in pattern})
     if c is None:
         c = size * (rng.normal(size=sys.n) + 1j * rng.normal(size=sys.n))
+        r = _norm_row(model)
+        if r is not None:
+            c[r] = 0.0
     return np.concatenate([qa, pp, c])
 
 
@@ -1190,6 +1291,9 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
     rng = np.random.default_rng([int(seed), 7])
     sc = np.asarray(model.x_scale, dtype=float)
     x0 = sc * (rng.normal(size=sys.n) + 1j * rng.normal(size=sys.n))
+    q = np.asarray(_enum.layout(model).quat, dtype=int)
+    if q.size == 4:  # a unit quaternion (q . q = 1, complex): the norm row's offset is 0
+        x0[q] /= np.sqrt(x0[q] @ x0[q])
     th = _random_theta(sys, model, rng, c=np.zeros(sys.n))
     H, _, _ = sys.eval(x0[None, :], th[None, :], np.zeros((1, sys.nth)))
     th[-sys.n:] = H[0]  # with c = 0, H(x0) = F(x0): c0 = F(x0) makes x0 a solution
