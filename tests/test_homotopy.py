@@ -361,14 +361,26 @@ def test_monodromy_of_the_3rps_at_joint_level_finds_its_16_solutions():
     legs: a revolute screw with w . w != 1 or w . v != 0 is no rotation, and its
     exponential is not 2 pi periodic in the angle. Now it stops, after 10 loops in a row
     without a new one, at 16 distinct solutions (two seeds), each a solution of the start
-    system with its angles identified modulo 2 pi only."""
+    system with its angles identified modulo 2 pi only, and no path of its loops diverges
+    (with the axes normalised at each end rather than fixed, a third did: mid-path they
+    were no unit vectors)."""
     from optkin.model.core import get_model
     from optkin.solvers import homotopy as H
 
     M = get_model(optkin.mechanisms.rps3())
     assert H._system(M).periodic[7:].all() and not H._system(M).periodic[:7].any()
+    ends = []
+    track = H.track
+
+    def counted(*a, **k):
+        P = track(*a, **k)
+        ends.extend(P.status)
+        return P
+
     for seed in (0, 1):
-        S = H.start_system(M, seed=seed, stale=10, max_loops=80, verify=False)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(H, "track", counted)
+            S = H.start_system(M, seed=seed, stale=10, max_loops=80, verify=False)
         assert S.stopped == "stale" and len(S.solutions) == 16, (seed, S.stopped, len(S.solutions))
         sys_ = H._system(M)
         res = sys_.eval(S.solutions, np.repeat(S.theta[None], 16, 0),
@@ -379,6 +391,7 @@ def test_monodromy_of_the_3rps_at_joint_level_finds_its_16_solutions():
         key = np.c_[S.solutions[:, :3], q, np.cos(S.solutions[:, 7:]), np.sin(S.solutions[:, 7:])]
         gap = min(np.max(np.abs(key[i] - key[j])) for i in range(16) for j in range(i))
         assert gap > 1e-4
+    assert len(ends) > 100 and set(ends) == {"finite"}, sorted(set(ends))
 
 
 _ORDER = """

@@ -382,6 +382,23 @@ class Mechanism:
                      for n in leg.geometry_names())
 
     @property
+    def passive_revolute_screws(self) -> tuple[tuple[int, ...], ...]:
+        """Where the screws (w, v) of revolute joints whose angle is an unknown of the
+        closure sit in :attr:`geometry` (six indices each; none for a Khalil table, whose
+        rows are rigid by construction). A rigid screw has w . w = 1 and w . v = 0; the
+        homotopy keeps its random start geometry so."""
+        if self.kind == "khalil":
+            return ()
+        out, at = [], 0
+        for leg in self.legs:
+            S = np.asarray(leg.screws, dtype=float)
+            unknown = len(S) - leg.n_reported  # (reported variables are no unknowns)
+            out += [tuple(range(at + 6 * k, at + 6 * k + 6)) for k in range(unknown)
+                    if k not in leg.actuated and np.any(S[k, :3])]
+            at += len(leg.geometry_names())
+        return tuple(out)
+
+    @property
     def active_names(self) -> tuple[str, ...]:
         return tuple(n for n, a in zip(self.joint_names, self.actuated) if a)
 

@@ -9,8 +9,9 @@ trick) and Duff et al. (2019, monodromy), for the closure of any square model:
   Jacobian in x and its derivative along a direction of theta are one CasADi Function,
   made complex by :func:`optkin.model.complexify.complexify` and mapped over the paths.
 * start systems by monodromy. At random complex parameters theta_0 (geometry entries
-  equal to 0, +-pi/2 or +-pi kept: :func:`structural`; legs' screws kept rigid and the
-  quaternion's norm row without offset: :func:`_keep_rigid`; c_0 = F(x_0; q_a0, p_0)
+  equal to 0, +-pi/2 or +-pi kept, and the axes of passive revolutes: :func:`structural`;
+  legs' screws kept rigid and the quaternion's norm row without offset:
+  :func:`_keep_rigid`; c_0 = F(x_0; q_a0, p_0)
   for a random complex x_0, which is then a solution by construction), the solutions are
   grown by loops theta_0 -> theta_1 -> theta_2 -> theta_0 through random complex
   parameters: each loop permutes the solutions, and new endpoints are new solutions. The
@@ -1161,19 +1162,21 @@ def _structural(model) -> tuple[tuple[int, float], ...]:
     sys = _system(model)
     p = np.asarray(model.p, dtype=float)[sys.p_used]
     hit = np.abs(p[:, None] - _SPECIAL[None, :]) <= 1e-12
-    rows = np.flatnonzero(hit.any(axis=1))
-    vals = _SPECIAL[hit[rows].argmax(axis=1)]
-    return tuple(zip((sys.na + rows).tolist(), vals.tolist()))
+    vals = dict(zip(np.flatnonzero(hit.any(axis=1)).tolist(),
+                    _SPECIAL[hit[hit.any(axis=1)].argmax(axis=1)].tolist()))
+    for ix in _rigid(model).revolute:  # the axes of passive revolutes (:func:`_keep_rigid`)
+        for k in ix[:3]:
+            vals.setdefault(int(k), float(p[k]))
+    rows = sorted(vals)
+    return tuple(zip((sys.na + np.array(rows, int)).tolist(), [vals[r] for r in rows]))
 
 
 @dataclass(frozen=True)
 class _Rigid:
-    """Where a leg's screws and home rotations sit among the homotopy's geometry parameters
-    (positions in ``p_used``; -1 for an entry the closure does not read)."""
+    """The revolute screws (w, v) of legs whose angle is an unknown of the closure, as
+    positions among the homotopy's geometry parameters (of ``p_used``)."""
 
-    revolute: tuple[tuple[int, ...], ...]  # (w0, w1, w2, v0, v1, v2) of each rotation
-    prismatic: tuple[tuple[int, ...], ...]  # (v0, v1, v2) of each translation
-    home: tuple[int, ...]  # rotation entries of the legs' home poses
+    revolute: tuple[tuple[int, ...], ...]
 
 
 _RIGID: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -1187,66 +1190,30 @@ def _rigid(model) -> _Rigid:
 
 
 def _rigid_slots(model) -> _Rigid:
-    import re
-
     sys = _system(model)
-    names = list(getattr(model.mech, "geometry_names", ()))
-    at = {names[int(i)]: k for k, i in enumerate(sys.p_used)} if names else {}
-    p = np.asarray(model.p, dtype=float)
-    rev, pri, home = [], [], []
-    for n in names:
-        m = re.fullmatch(r"(legs\[\d+\]\.)(screws\[\d+\])\[0\]", n)
-        if m:
-            key = m.group(1) + m.group(2)
-            ix = tuple(at.get(f"{key}[{c}]", -1) for c in range(6))
-            w = p[[names.index(f"{key}[{c}]") for c in range(3)]]
-            if np.any(w != 0):
-                rev.append(ix)
-            else:
-                pri.append(ix[3:])
-        m = re.fullmatch(r"legs\[\d+\]\.home\[([012])\]\[([012])\]", n)
-        if m and n in at:
-            home.append(at[n])
-    return _Rigid(tuple(rev), tuple(pri), tuple(home))
-
-
-def _unit(x: np.ndarray, free: list[int]) -> None:
-    """Scale the ``free`` entries of ``x`` so that x . x = 1 (complex, unconjugated)."""
-    fixed = sum(x[c] ** 2 for c in range(3) if c not in free)
-    f = sum(x[c] ** 2 for c in free)
-    if free and abs(f) > 1e-12:
-        x[free] *= np.sqrt((1 - fixed) / f)
+    at = {int(i): k for k, i in enumerate(sys.p_used)}
+    rev = [tuple(at.get(i, -1) for i in ix)
+           for ix in getattr(model.mech, "passive_revolute_screws", ())]
+    return _Rigid(tuple(ix for ix in rev if min(ix) >= 0))
 
 
 def _keep_rigid(model, pp: np.ndarray, fixed: set[int]) -> np.ndarray:
-    """Random complex geometry ``pp`` moved back into the family of rigid legs: every
-    revolute screw (w, v) with w . w = 1 and w . v = 0, every prismatic direction with
-    v . v = 1 (complex, unconjugated), changing only entries not in ``fixed``
-    (:func:`structural`); a leg's home rotation keeps its real values. Screws outside that
-    family are not rigid motions, and their exponentials are not 2 pi periodic in the
-    joint angle (the translation keeps a term in theta itself when w . v != 0): the start
-    system of a 3-RPS at joint level had a lattice of solutions theta + 2 pi k / |w|,
-    and monodromy found thousands of them."""
-    rig = _rigid(model)
-    real = np.asarray(model.p, dtype=float)[_system(model).p_used]
-    for ix in rig.revolute:
-        if min(ix) < 0:
-            continue
-        w, v = pp[list(ix[:3])].copy(), pp[list(ix[3:])].copy()
-        _unit(w, [c for c in range(3) if ix[c] not in fixed])
+    """Random complex geometry ``pp`` moved back into the family of rigid legs: the axis w
+    of a revolute whose angle is an unknown is structural (:func:`structural`), and its
+    v = -w x (a point of the axis) is projected onto w . v = 0, changing only entries not
+    in ``fixed``. A screw with w . w != 1 or w . v != 0 is no rotation, and its exponential
+    is not 2 pi periodic in the angle (its translation keeps a term in theta itself): the
+    start system of a 3-RPS at joint level had a lattice of solutions theta + 2 pi k / |w|,
+    and monodromy found thousands of them. Both conditions are linear once w is fixed, so
+    the straight parameter paths of the homotopy keep them too (a w normalised at each
+    end would not: mid-path it is no unit vector, and paths diverged)."""
+    for ix in _rigid(model).revolute:
+        w, v = pp[list(ix[:3])], pp[list(ix[3:])].copy()
         fv = [c for c in range(3) if ix[3 + c] not in fixed]
         g = sum(w[c] ** 2 for c in fv)
         if fv and abs(g) > 1e-12:
             v[fv] -= (w @ v) * w[fv] / g
-        pp[list(ix[:3])], pp[list(ix[3:])] = w, v
-    for ix in rig.prismatic:
-        if min(ix) < 0:
-            continue
-        v = pp[list(ix)].copy()
-        _unit(v, [c for c in range(3) if ix[c] not in fixed])
-        pp[list(ix)] = v
-    for k in rig.home:
-        pp[k] = real[k]
+        pp[list(ix[3:])] = v
     return pp
 
 
