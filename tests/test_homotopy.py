@@ -341,13 +341,12 @@ def test_khalil_sr400_against_the_multistart():
 
 
 def test_time_limit_stops_a_monodromy_that_does_not_end(monkeypatch, tmp_path):
-    """The 3-RPS written at joint level: monodromy finds its 16 solutions in about 1.5 s
-    (below) but the trace test does not pass on them, so rounds follow; the call stops at
-    the time budget, says so, and stores nothing."""
+    """Tsai's 3-UPU written at joint level: monodromy keeps finding solutions (666 after
+    12 loops, 220 s); the call stops at the time budget, says so, and stores nothing."""
     monkeypatch.setenv("OPTKIN_TIME_BUDGET", "2")
     monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
-    m = optkin.mechanisms.rps3()
-    modes = optkin.assembly_modes(m, [1.03, 1.03, 1.03], method="homotopy")
+    m = optkin.mechanisms.upu3()
+    modes = optkin.assembly_modes(m, [1.2, 1.2, 1.2], method="homotopy")
     assert not modes.complete and modes.info["status"] == "time_limit"
     assert modes.info["monodromy_stopped"] == "time"
     assert "time limit" in modes.info["message"]
@@ -392,6 +391,27 @@ def test_monodromy_of_the_3rps_at_joint_level_finds_its_16_solutions():
         gap = min(np.max(np.abs(key[i] - key[j])) for i in range(16) for j in range(i))
         assert gap > 1e-4
     assert len(ends) > 100 and set(ends) == {"finite"}, sorted(set(ends))
+
+
+def test_every_assembly_mode_of_a_3rps_complete(tmp_path, monkeypatch):
+    """The 3-RPS (joint level): every path accounted for, complete, and each real mode a
+    configuration of the legs checked here with numpy: the platform point at its leg's
+    length from the base point, in the plane through it normal to the revolute's axis.
+    The count equals the multistart's."""
+    monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
+    m = optkin.mechanisms.rps3(1.0, 0.5)
+    for qa in ([1.03, 1.03, 1.03], [1.2, 0.9, 1.1]):
+        modes = optkin.assembly_modes(m, qa, method="homotopy")
+        assert modes.complete and modes.stats.paths == 16 and modes.stats.failed == 0, \
+            modes.info["message"]
+        assert len(modes) == len(optkin.assembly_modes(m, qa, method="multistart"))
+        for r in modes:
+            T = np.asarray(r.pose)
+            for leg, q in zip(m.legs, qa):
+                P = T[:3, :3] @ np.asarray(leg.platform, float) + T[:3, 3]
+                a = np.asarray(leg.base, float)
+                assert abs(np.linalg.norm(P - a) - q) < 1e-9
+                assert abs(np.dot(P - a, np.asarray(leg.axis, float))) < 1e-9
 
 
 _ORDER = """

@@ -37,6 +37,33 @@ def test_trace_passes_on_a_complete_set_and_fails_without_one_solution():
         assert not np.isfinite(bad.residual) or bad.residual > 1e-4
 
 
+def test_trace_passes_on_the_3rps_whose_solutions_satisfy_affine_relations():
+    """The 3-RPS at joint level: its 16 solutions satisfy three affine relations in the
+    test's coordinates (the platform's origin is an affine combination of the three leg
+    ends, each linear in cos and sin of its angle; checked here: [y, 1] has rank 11). A
+    slice fitted through all 13 first solutions contained every one of them, and the test
+    failed on this complete set (residual 8e-2); through fewer it passes to round-off."""
+    from optkin.solvers.trace import _trace_system
+
+    model = get_model(optkin.mechanisms.rps3())
+    S = H.start_system(model, seed=0, stale=10, max_loops=80, verify=False)
+    assert S.stopped == "stale" and S.root_count == 16
+    Y = _trace_system(model).coords(S.solutions)
+    assert np.linalg.matrix_rank(np.c_[Y, np.ones(16)], tol=1e-9 * np.abs(Y).max()) == 11
+    ok = trace_test(model, S, seed=1)
+    assert ok.passed and ok.residual < 1e-9, ok.message
+
+
+@pytest.mark.slow
+def test_trace_fails_on_the_3rps_without_one_solution():
+    """(80 s here.)"""
+    model = get_model(optkin.mechanisms.rps3())
+    S = H.start_system(model, seed=0, stale=10, max_loops=80, verify=False)
+    short = dataclasses.replace(S, solutions=S.solutions[1:])
+    bad = trace_test(model, short, seed=1, max_loops=30)
+    assert not bad.passed and (not np.isfinite(bad.residual) or bad.residual > 1e-4)
+
+
 def test_four_bar_start_system_is_complete_by_the_trace_test():
     """A Khalil table has no known bound: monodromy stops when the trace test passes, and
     the count is the closed form's (two circle intersections)."""

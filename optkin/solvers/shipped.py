@@ -81,6 +81,7 @@ CATALOGUE: list[tuple[str, Callable, bool]] = [
     ("five_bar", _lib("five_bar", 1.3, 0.8, 1.1, 0.9, 0.7), False),
     ("four_bar", _lib("four_bar", 1.0, 0.4, 1.2, 0.9), False),
     ("delta", _lib("delta"), False),
+    ("rps3", _lib("rps3"), True),  # joint level: 16 solutions, trace test 10-20 s
     ("sr400", _lib("sr400"), True),  # 20 s: its 11 500-operation system compiles slowly
     ("akr3000", _lib("akr3000"), True),
     ("stewart_gough", _generic_stewart, True),
