@@ -1162,39 +1162,27 @@ def _structural(model) -> tuple[tuple[int, float], ...]:
     sys = _system(model)
     p = np.asarray(model.p, dtype=float)[sys.p_used]
     hit = np.abs(p[:, None] - _SPECIAL[None, :]) <= 1e-12
-    vals = dict(zip(np.flatnonzero(hit.any(axis=1)).tolist(),
-                    _SPECIAL[hit[hit.any(axis=1)].argmax(axis=1)].tolist()))
-    for ix in _rigid(model).revolute:  # the axes of passive revolutes (:func:`_keep_rigid`)
+    rows = np.flatnonzero(hit.any(axis=1))
+    vals = dict(zip(rows.tolist(), _SPECIAL[hit[rows].argmax(axis=1)].tolist()))
+    for ix in _rigid_screws(model):  # the axes of passive revolutes (:func:`_keep_rigid`)
         for k in ix[:3]:
             vals.setdefault(int(k), float(p[k]))
-    rows = sorted(vals)
-    return tuple(zip((sys.na + np.array(rows, int)).tolist(), [vals[r] for r in rows]))
+    keys = sorted(vals)
+    return tuple(zip((sys.na + np.array(keys, int)).tolist(), [vals[k] for k in keys]))
 
 
-@dataclass(frozen=True)
-class _Rigid:
-    """The revolute screws (w, v) of legs whose angle is an unknown of the closure, as
-    positions among the homotopy's geometry parameters (of ``p_used``)."""
+def _rigid_screws(model) -> tuple[tuple[int, ...], ...]:
+    """The screws (w, v) of revolutes whose angle is an unknown of the closure, as
+    positions among the homotopy's geometry parameters (of ``p_used``; once per
+    topology)."""
 
-    revolute: tuple[tuple[int, ...], ...]
+    def build():
+        at = {int(i): k for k, i in enumerate(_system(model).p_used)}
+        rev = [tuple(at.get(i, -1) for i in ix)
+               for ix in getattr(model.mech, "passive_revolute_screws", ())]
+        return tuple(ix for ix in rev if min(ix) >= 0)
 
-
-_RIGID: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def _rigid(model) -> _Rigid:
-    out = _RIGID.get(model)
-    if out is None:
-        out = _RIGID[model] = _rigid_slots(model)
-    return out
-
-
-def _rigid_slots(model) -> _Rigid:
-    sys = _system(model)
-    at = {int(i): k for k, i in enumerate(sys.p_used)}
-    rev = [tuple(at.get(i, -1) for i in ix)
-           for ix in getattr(model.mech, "passive_revolute_screws", ())]
-    return _Rigid(tuple(ix for ix in rev if min(ix) >= 0))
+    return model.topology.cached("homotopy:rigid", build)
 
 
 def _keep_rigid(model, pp: np.ndarray, fixed: set[int]) -> np.ndarray:
@@ -1207,7 +1195,7 @@ def _keep_rigid(model, pp: np.ndarray, fixed: set[int]) -> np.ndarray:
     and monodromy found thousands of them. Both conditions are linear once w is fixed, so
     the straight parameter paths of the homotopy keep them too (a w normalised at each
     end would not: mid-path it is no unit vector, and paths diverged)."""
-    for ix in _rigid(model).revolute:
+    for ix in _rigid_screws(model):
         w, v = pp[list(ix[:3])], pp[list(ix[3:])].copy()
         fv = [c for c in range(3) if ix[3 + c] not in fixed]
         g = sum(w[c] ** 2 for c in fv)
