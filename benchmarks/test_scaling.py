@@ -29,10 +29,14 @@ measured:
 * the unit costs: each problem's ``elapsed`` in the warm ``--jobs 1`` runs (the worker's
   time to fetch the model and run the tasks, from the result files; the median over the
   rounds), with the runner's estimated cost and topology group of each;
-* the set-up of a topology in a worker: the first unit's cost over the median of the
-  others, in the order the runner ran them (warm run); a worker pays it for every
-  topology it meets;
-* the compile of a topology (cold): the same excess in the cold run less the warm one,
+* the set-up of a topology in a worker (:func:`setups`): in a fresh process that has
+  imported what a worker imports before it says ready, the first problem of each
+  topology run twice, the first run's cost less the second's (warm cache); a worker pays
+  it for every topology it meets. (The first unit's cost over the median of the others,
+  used before, also counted how much that problem itself costs: the batch's first
+  five-bar costs 0.5 s in every run against a median of 0.3 s);
+* the compile of a topology (cold): the first unit's excess over the median of its
+  topology in the cold run less that in the warm one (the problem's own cost cancels),
   paid once per cache; the model charges the wait to every worker that meets the topology
   before its code lands (an upper bound: those workers run the interpreted code
   meanwhile);
@@ -234,20 +238,57 @@ def results_of(out: Path) -> dict[str, object]:
 # The model
 # ---------------------------------------------------------------------------------------
 
-def warmups(units) -> tuple[dict[str, float], list[float]]:
-    """Per topology, the first unit's cost over the median of the others; and the unit
-    costs with that excess removed (the first unit costs the median)."""
+def warmups(units) -> dict[str, float]:
+    """Per topology, the first unit's cost over the median of the others. This mixes the
+    set-up with how much the first problem itself costs (the batch's first five-bar costs
+    0.5 s at every run, the median 0.3 s); it serves only where that cancels: the compile
+    of a topology, this excess in a cold run less that in a warm one."""
     by: dict[str, list[float]] = {}
     for _, topo, c, _ in units:
         by.setdefault(topo, []).append(c)
-    excess = {t: max(0.0, cs[0] - float(np.median(cs[1:]))) if len(cs) > 1 else 0.0
-              for t, cs in by.items()}
+    return {t: max(0.0, cs[0] - float(np.median(cs[1:]))) if len(cs) > 1 else 0.0
+            for t, cs in by.items()}
+
+
+_SETUP = """
+import json, sys
+from optkin.problems.workers import _preload
+from optkin.problems.runner import run_job
+_preload()  # as a worker does before it says ready
+out = {}
+for topo, f in json.loads(sys.argv[1]):
+    data = open(f, "rb").read()
+    out[topo] = [run_job(f, data, f, pictures=False)["result"]["elapsed"] for _ in range(2)]
+print(json.dumps(out))
+"""
+
+
+def setups(units, batch: Path, cache: Path, reps: int = 3) -> dict[str, float]:
+    """The set-up of each topology in a worker: in a fresh process that has imported what
+    a worker imports before it says ready, the first unit of each topology (in the
+    runner's order) run twice in a row; the first run's cost less the second's (the median
+    of ``reps`` processes). The same problem both times, so none of its own cost counts."""
+    first: dict[str, str] = {}
+    for prob, topo, _, _ in units:
+        first.setdefault(topo, str(batch / prob))
+    env = dict(os.environ, OPTKIN_CACHE=str(cache))
+    env.pop("MALLOC_TRIM_THRESHOLD_", None)
+    runs = []
+    for _ in range(reps):
+        p = subprocess.run([sys.executable, "-c", _SETUP, json.dumps(list(first.items()))],
+                           env=env, capture_output=True, text=True, timeout=600, check=True)
+        runs.append(json.loads(p.stdout.splitlines()[-1]))
+    return {t: float(np.median([max(0.0, r[t][0] - r[t][1]) for r in runs])) for t in first}
+
+
+def unit_net_costs(units, setup: dict[str, float]) -> list[float]:
+    """The unit costs with the set-up taken out of each topology's first unit."""
     seen: set[str] = set()
     costs = []
     for _, topo, c, _ in units:
-        costs.append(c - excess[topo] if topo not in seen else c)
+        costs.append(max(0.0, c - setup.get(topo, 0.0)) if topo not in seen else c)
         seen.add(topo)
-    return excess, costs
+    return costs
 
 
 def predict(units, costs, fixed: float, per_unit: float, warm: dict[str, float],
@@ -425,9 +466,10 @@ def test_scaling(benchmark, tmp_path):
             "fixed_samples": fixed_samples}
     # the model, fed with the first one-worker runs: warm for the steady state, cold for
     # the compile of each topology (its first unit's excess over the warm run's)
-    excess, costs = warmups(units["warm"])
-    cold_excess, _ = warmups(units["cold"])
-    compile_ = {t: max(0.0, cold_excess[t] - excess.get(t, 0.0)) for t in cold_excess}
+    excess = setups(units["warm"], batch, filled)
+    costs = unit_net_costs(units["warm"], excess)
+    first_warm, first_cold = warmups(units["warm"]), warmups(units["cold"])
+    compile_ = {t: max(0.0, first_cold[t] - first_warm.get(t, 0.0)) for t in first_cold}
     t1 = med["pool1_warm"]  # the runs the unit costs come from
     # the parent's CPU per unit beyond its start-up (that of the one-problem run; the
     # start-up is in the fixed cost already): measured 0.50-0.55 s for the 64 problems
