@@ -84,6 +84,114 @@ def test_cuspidal_3rpr_aspects_against_a_voxel_grid():
     assert res.cuspidal and max(n for a in res for _, n in a.modes_at) >= 2
 
 
+#: A 3-RRR with equilateral base (side 10) and platform (circumradius 2), proximal links 5
+#: and distal 4: each leg's platform point within the annulus 1 <= |P - A| <= 9.
+RRR_BASE = [[0.0, 0.0], [10.0, 0.0], [5.0, 5.0 * np.sqrt(3.0)]]
+RRR_PLAT = [[2 * np.cos(a), 2 * np.sin(a)] for a in (7 * np.pi / 6, -np.pi / 6, np.pi / 2)]
+
+
+def _components(free: np.ndarray, cell: float) -> list[float]:
+    """Volumes of the connected components of ``free`` (n, n, m) with the last axis
+    periodic, largest first."""
+    from scipy import ndimage
+
+    lab, nl = ndimage.label(free)
+    parent = list(range(nl + 1))
+
+    def root(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    a, b = lab[:, :, 0], lab[:, :, -1]
+    both = (a > 0) & (b > 0)
+    for u, v in set(zip(a[both].tolist(), b[both].tolist())):
+        parent[root(u)] = root(v)
+    roots = np.array([root(i) for i in range(nl + 1)])
+    counts = np.bincount(roots[lab.ravel()], minlength=nl + 1)
+    return sorted((c * cell for r, c in enumerate(counts) if r > 0 and c > 0), reverse=True)
+
+
+def rrr_voxels(n: int, l1: float = 5.0, l2: float = 4.0):
+    """{(elbows, sign of det A): component volumes} on an n^3 grid over a box holding the
+    workspace x [-pi, pi). Each leg by hand: the elbow C = A + l1 (cos t, sin t) from the
+    law of cosines (two, one on each side of A -> P), the leg's posture the side, i.e. the
+    sign of (C - A) x (P - C) (the sign of B_ii up to a convention); det A from the rows
+    (d, (R b) x d), d = P - C (the derivative of |P - C|^2 / 2 in x, y, phi)."""
+    xs = np.linspace(-3.0, 13.0, n)
+    ys = np.linspace(-5.0, 12.0, n)
+    ph = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    cell = (xs[1] - xs[0]) * (ys[1] - ys[0]) * (ph[1] - ph[0])
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    modes = [(a, b, c) for a in (1, -1) for b in (1, -1) for c in (1, -1)]
+    reach = np.zeros((n, n, n), bool)
+    sign = {w: np.zeros((n, n, n), np.int8) for w in modes}
+    for k, p in enumerate(ph):
+        c, s = np.cos(p), np.sin(p)
+        ok = np.ones_like(X, bool)
+        legs = []
+        for A, b in zip(RRR_BASE, RRR_PLAT):
+            Rb = (c * b[0] - s * b[1], s * b[0] + c * b[1])
+            Px, Py = X + Rb[0], Y + Rb[1]
+            dx, dy = Px - A[0], Py - A[1]
+            r = np.hypot(dx, dy)
+            ok &= (r > abs(l1 - l2)) & (r < l1 + l2)
+            g = np.arccos(np.clip((l1 ** 2 + r ** 2 - l2 ** 2) / (2 * l1 * np.maximum(r, 1e-12)),
+                                  -1, 1))
+            two = []
+            for e in (1, -1):
+                t = np.arctan2(dy, dx) + e * g
+                ux, uy = l1 * np.cos(t), l1 * np.sin(t)
+                d0, d1 = Px - A[0] - ux, Py - A[1] - uy
+                two.append((np.sign(ux * d1 - uy * d0),
+                            np.stack([d0, d1, Rb[0] * d1 - Rb[1] * d0], -1)))
+            legs.append(two)
+        reach[:, :, k] = ok
+        for w in modes:
+            rows = [np.where((legs[i][0][0] == w[i])[..., None], legs[i][0][1], legs[i][1][1])
+                    for i in range(3)]
+            sign[w][:, :, k] = np.sign(np.linalg.det(np.stack(rows, -2)))
+    return {(w, sg): _components(reach & (sign[w] == sg), cell)
+            for w in modes for sg in (1, -1)}
+
+
+@pytest.mark.slow
+def test_3rrr_aspects_against_a_voxel_grid():
+    """Legs with two postures: every working mode's aspects in (x, y, phi) against the
+    grid's components, mode by mode. The grid's labels may differ from optkin's by a sign
+    convention (the legs' postures, det A): one relabelling must match all 16."""
+    m = optkin.mechanisms.rrr3(RRR_BASE, RRR_PLAT, 5.0, 4.0)
+    res = optkin.aspects(m)  # no section: the 3-D aspects
+    assert res.success, res.message
+    grid = rrr_voxels(200)  # 16 components at 120^3, 160^3 and 200^3
+    total = sum(sum(v) for v in grid.values())
+    big = {k: [v for v in vols if v > 1e-3 * total] for k, vols in grid.items()}
+    assert sum(len(v) for v in big.values()) == len(res) == 16
+    mine: dict = {}
+    for a in res:
+        mine.setdefault((tuple(a.working_mode), a.det_sign), []).append(a.volume)
+    matched = 0
+    for fw in (1, -1):
+        for fs in (1, -1):
+            ref = {(tuple(fw * np.array(w)), fs * sg): v for (w, sg), v in big.items()}
+            if set(ref) == set(mine) and all(
+                    len(ref[k]) == len(mine[k]) and all(
+                        abs(x - y) < 3e-3 * y for x, y in zip(sorted(mine[k]), sorted(ref[k])))
+                    for k in ref):
+                matched += 1
+    assert matched >= 1, (mine, big)
+    # every working mode: one aspect of each sign of det A, volumes summing to the mode's
+    # reachable volume (the same for every mode)
+    per_mode = {}
+    for a in res:
+        per_mode.setdefault(tuple(a.working_mode), []).append(a)
+    assert len(per_mode) == 8
+    sums = [sum(a.volume for a in v) for v in per_mode.values()]
+    assert all(sorted(a.det_sign for a in v) == [-1, 1] for v in per_mode.values())
+    assert np.ptp(sums) < 1e-3 * np.mean(sums)
+
+
 def test_arguments_and_dispatch():
     m = optkin.mechanisms.rpr3(BASE3, PLAT3)
     with pytest.raises(optkin.MechanismError, match="slices must be an integer >= 4"):

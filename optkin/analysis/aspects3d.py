@@ -29,9 +29,17 @@ and 2068.7 at 400^3 (23 s). The method is exact in x and y but not in phi, and s
 (0.09 s per section, mostly the continuation of every section's curves): the exact
 topology-changing orientations and a faster section are the next steps (see the issue
 tracker). An aspect whose whole extent in phi is shorter than ``min_gap`` may be
-missed, and a neck thinner than it in phi may join or split aspects. Legs with several
-postures (3-RRR) are refused: the free test and the count of modes handle working
-modes, but the sections' faces do not link reliably yet.
+missed, and a neck thinner than it in phi may join or split aspects.
+
+Legs with several postures (3-RRR, 3-PRR) get their aspects per working mode the same
+way, at the sections' finer default step (see ``step``). Measured on a 3-RRR (equilateral
+base of side 10 and platform of circumradius 2, links 5 and 4; tests/test_aspects3d.py):
+16 aspects, two per working mode, volumes 154.77 (2), 148.50 (6), 107.71 (6) and 101.44
+(2) from 143 sections, about 170 s here, against a 200^3 voxel grid's 16 components,
+154.80, 148.44-148.45, 107.63-107.64 and 101.31 (101.24 at 160^3). A design whose legs
+fold completely (links of equal length: the inner serial circle shrinks to the base
+joint, where the leg's inverse is singular) is not handled reliably: with links 5 and 5
+some sections' curves stopped early near phi = +-1.4 and the aspects fell apart.
 """
 
 from __future__ import annotations
@@ -59,7 +67,9 @@ ASPECTS3D_DEFAULTS: dict[str, Any] = {
     "modes": True,  # count the assembly modes each aspect holds at its representative q_a
     "tiny": 1e-5,  # a face under this fraction of its section's largest area may appear
     # or vanish between two sections without refinement
-    "step": 0.25,  # largest continuation step of the sections' curves (scaled units, > 0)
+    # largest continuation step of the sections' curves (scaled units, > 0; None: 0.25 when
+    # every actuator is its leg's length, else the sections' default 0.08)
+    "step": None,
     "time_limit": 300.0,  # seconds (capped by the time budget); past it no gap is refined
 }
 
@@ -317,10 +327,13 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     tiny : float
         A face below this fraction of its section's largest area may be born or die
         between two sections without refinement.
-    step : float
+    step : float, optional
         Largest continuation step of the sections' curves (scaled units; the step still
-        adapts to their turning). 0.25 by default: on the cuspidal 3-RPR the volumes
-        then agree with a 240^3 grid to 4e-4, in half the time of the default 0.08.
+        adapts to their turning). By default 0.25 when every actuator is its leg's length
+        (3-RPR: the volumes then agree with a 240^3 grid to 4e-4, in half the time of
+        0.08), else the sections' own default 0.08 (legs with a driven revolute or slider
+        add their serial circles, the inner one of radius |l1 - l2|, which 0.25 does not
+        resolve: a 3-RRR's aspects fell apart into 64 pieces).
     time_limit : float
         Seconds (capped by the time budget); past it no gap is refined any more and the
         result says so (``success=False``, status ``"time_limit"``).
@@ -342,7 +355,7 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     limits, bounds, modes = opts["limits"], opts["bounds"], opts["modes"]
     min_gap = num("min_gap", lo=0.0, lo_open=True)
     tiny = num("tiny", lo=0.0)
-    step = num("step", lo=0.0, lo_open=True)
+    step = None if opts["step"] is None else num("step", lo=0.0, lo_open=True)
     deadline = Deadline(min(num("time_limit", lo=0.0, lo_open=True), time_budget()))
     from .aspects import aspects
 
@@ -360,13 +373,15 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     if chart is None:
         raise MechanismError(f"aspects3d: {mech.name}'s legs are not distance constraints "
                              "with one actuator each (3-RPR, 3-RRR, 3-PRR): no planar chart")
-    if chart.n_combos != 1:
-        # the free test and the count of modes handle working modes, but the sections'
-        # faces do not link reliably yet: a 3-RRR (equilateral base of side 10, links 5)
-        # gave 255 fragments in 235 sections where a voxel grid has 16 aspects
-        raise MechanismError(f"aspects3d: {mech.name}'s legs have several postures (working "
-                             "modes); only legs with one inverse (3-RPR) are handled yet: "
-                             "use optkin.aspects(mech, fixed={...}) for sections")
+    if step is None:
+        # legs whose actuator is their length (3-RPR) have no serial singularity: the
+        # sections' curves are the parallel ones and the strokes' circles, which 0.25
+        # resolves (volumes within 4e-4 of a 240^3 grid, half the time of 0.08). Legs with
+        # a driven revolute or slider (3-RRR, 3-PRR) add the legs' serial circles, the
+        # inner one as small as |l1 - l2|: at 0.25 a 3-RRR's (radius 1 in a mechanism of
+        # size 10) was under-resolved, sections dropped faces of area 12 and the aspects
+        # fell apart into 64 pieces; at 0.08 the voxel grid's 16
+        step = 0.25 if bool(np.all(chart.length_actuated)) else None
     angle = turn[0]
     cache: dict[float, Any] = {}
     from .aspects import min_face_area
@@ -478,7 +493,18 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     order = sorted(cache)
     spacing = 2 * np.pi / int(slices)
     out: list[Aspect3D] = []
+    slivers = 0
     for members in groups.values():
+        if len(members) == 1:
+            # a face of about the sections' sliver size (which one section keeps and the
+            # next drops, so the refinement does not locate it) seen in one section only:
+            # below the resolution, not an aspect (a 3-RRR's: areas 0.013-0.016 for a
+            # floor of 0.013, 16 of them beside the grid's 16 aspects)
+            p, i = members[0]
+            big = max(f[2].area for f in faces(p))
+            if faces(p)[i][2].area <= max(tiny * big, 2 * floor):
+                slivers += 1
+                continue
         secs = [(p, faces(p)[i]) for p, i in members]
         area = dict.fromkeys(order, 0.0)
         for p, (_, _, f, _) in secs:
@@ -506,6 +532,8 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     msg = (f"{n} aspect(s) of {mech.name} in (x, y, {angle}) from {len(order)} sections "
            f"({int(slices)} even, {len(order) - int(slices)} added where the sections' faces "
            f"change); volumes {[round(a.volume, 6) for a in out]}"
+           + (f"; {slivers} face(s) of the sections' sliver size seen in one section only "
+              "(below the resolution) not counted" if slivers else "")
            + ("; refinement stopped at the time limit: counts may be wrong" if late else ""))
     return Aspects3D(mech.name, out, np.array(order), not late,
                      TIME_LIMIT if late else OPTIMAL, msg,
