@@ -238,3 +238,36 @@ def test_arc_corrected_areas_and_the_phi_integral():
     assert abs(_integrate(phi, A) - 10 * np.pi) < 0.1 * abs(trap - 10 * np.pi)
     B = np.where(np.abs(phi) < 1, np.cos(phi * np.pi / 2) ** 2, 0.0)  # integral 1
     assert abs(_integrate(phi, B) - 1.0) < 1e-2
+
+
+def test_plot_gives_each_working_mode_its_panel(tmp_path):
+    """Aspects of several working modes overlap in (x, y, phi): one panel per mode, each
+    with its own aspects in its legend; one mode (or an Axes given): one panel."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from optkin.analysis.aspects3d import Aspect3D, Aspects3D
+    from optkin.analysis.planar import Face
+
+    sq = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+
+    def asp(mode, sign, dx):
+        f = Face(sq + dx, area=1.0, point=np.array([0.5 + dx, 0.5]))
+        return Aspect3D(mode, sign, 1.0, np.zeros((3, 2)), np.zeros(6),
+                        [(-0.1, f), (0.1, f)])
+
+    many = Aspects3D("m", [asp((1, 1, 1), 1, 0), asp((1, 1, 1), -1, 2),
+                           asp((1, -1, 1), 1, 4)], np.array([-0.1, 0.1]), True, "optimal", "")
+    fig = many.plot(str(tmp_path / "a.png"))
+    assert (tmp_path / "a.png").stat().st_size > 0
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles == ["working mode (+, +, +)", "working mode (+, -, +)"]
+    legends = [[t.get_text() for t in ax.get_legend().get_texts()] for ax in fig.axes]
+    assert [len(x) for x in legends] == [2, 1] and legends[1][0].startswith("aspect 3:")
+    one = Aspects3D("m", many.aspects[:2], many.phis, True, "optimal", "")
+    assert len(one.plot().axes) == 1
+    ax = plt.figure().add_subplot(projection="3d")
+    assert many.plot(ax=ax) is ax.figure and len(ax.get_legend().get_texts()) == 3
+    plt.close("all")

@@ -163,31 +163,54 @@ class Aspects3D:
              ax: Any = None) -> Any:
         """The aspects as stacks of section outlines in (x, y, phi), one colour each.
 
-        Returns the matplotlib Figure; ``ax`` (a 3-D Axes) draws into yours, ``path``
-        writes the picture.
+        With several working modes (legs with two postures: a 3-RRR's 8) and no ``ax``,
+        one panel per working mode: their aspects overlap in (x, y, phi), so drawn
+        together they would hide one another. Returns the matplotlib Figure; ``ax`` (a 3-D
+        Axes) draws every aspect into yours, ``path`` writes the picture.
         """
-        from .aspects import _axes, _check_path, _save
+        from .aspects import _axes, _check_path, _mode_str, _save
 
         _check_path(path)
         if ax is not None and getattr(ax, "name", "") != "3d":
             raise MechanismError("ax: expected a 3-D Axes (fig.add_subplot(projection='3d'))")
-        fig, ax, _ = _axes(ax, (7.5, 6.5), three_d=True, path=path)
-        for k, a in enumerate(self.aspects):
-            color = f"C{k % 10}"
-            label = (f"aspect {k + 1}: det {'+' if a.det_sign > 0 else '-'}, "
-                     f"volume {a.volume:.4g}")
-            for i, (phi, f) in enumerate(a.sections[::max(1, every)]):
-                R = np.vstack([f.outer, f.outer[:1]])
-                ax.plot(R[:, 0], R[:, 1], np.full(len(R), phi), color=color, lw=0.8,
-                        label=label if i == 0 else None)
-        ax.set_xlabel(self.names[0])
-        ax.set_ylabel(self.names[1])
-        ax.set_zlabel(self.names[2] + " (rad)")
-        ax.legend(loc="upper left", fontsize=8)
-        ax.set_title(title or f"{self.mechanism}: {len(self.aspects)} generalized aspects")
+        modes = list(dict.fromkeys(tuple(a.working_mode) for a in self.aspects))
+        head = title or f"{self.mechanism}: {len(self.aspects)} generalized aspects"
+        if ax is None and len(modes) > 1:
+            from ..plot import _figure
+
+            cols = min(4, len(modes))
+            rows = -(-len(modes) // cols)
+            fig = _figure(path, (4.2 * cols, 4.0 * rows))
+            number = {id(a): k + 1 for k, a in enumerate(self.aspects)}
+            for m, mode in enumerate(modes):
+                sub = fig.add_subplot(rows, cols, m + 1, projection="3d")
+                mine = [a for a in self.aspects if tuple(a.working_mode) == mode]
+                self._draw(sub, mine, every, [number[id(a)] for a in mine])
+                sub.set_title(f"working mode {_mode_str(mode)}", fontsize=10)
+            fig.suptitle(head)
+            fig.tight_layout()
+        else:
+            fig, ax, _ = _axes(ax, (7.5, 6.5), three_d=True, path=path)
+            self._draw(ax, self.aspects, every, range(1, len(self.aspects) + 1))
+            ax.set_title(head)
         if path is not None:
             _save(fig, path)
         return fig
+
+    def _draw(self, ax: Any, aspects: list[Aspect3D], every: int, numbers: Any) -> None:
+        small = len(aspects) <= 4
+        for k, (a, num) in enumerate(zip(aspects, numbers)):
+            color = f"C{k % 10}"
+            label = (f"aspect {num}: det {'+' if a.det_sign > 0 else '-'}, "
+                     f"volume {a.volume:.4g}")
+            for i, (phi, f) in enumerate(a.sections[::max(1, every)]):
+                R = np.vstack([f.outer, f.outer[:1]])
+                ax.plot(R[:, 0], R[:, 1], np.full(len(R), phi), color=color,
+                        lw=0.6 if small else 0.8, label=label if i == 0 else None)
+        ax.set_xlabel(self.names[0])
+        ax.set_ylabel(self.names[1])
+        ax.set_zlabel(self.names[2] + " (rad)")
+        ax.legend(loc="upper left", fontsize=7 if small else 8)
 
 
 def _overlap(f: Face, g: Face) -> bool:
@@ -332,7 +355,7 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
         adapts to their turning). By default 0.25 when every actuator is its leg's length
         (3-RPR: the volumes then agree with a 240^3 grid to 4e-4, in half the time of
         0.08), else the sections' own default 0.08 (legs with a driven revolute or slider
-        add their serial circles, the inner one of radius |l1 - l2|, which 0.25 does not
+        add their serial circles, the inner one of radius ``|l1 - l2|``, which 0.25 does not
         resolve: a 3-RRR's aspects fell apart into 64 pieces).
     time_limit : float
         Seconds (capped by the time budget); past it no gap is refined any more and the
