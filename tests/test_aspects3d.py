@@ -271,3 +271,31 @@ def test_plot_gives_each_working_mode_its_panel(tmp_path):
     ax = plt.figure().add_subplot(projection="3d")
     assert many.plot(ax=ax) is ax.figure and len(ax.get_legend().get_texts()) == 3
     plt.close("all")
+
+
+def test_a_section_whose_curves_stopped_early_makes_the_result_inaccurate(monkeypatch):
+    """Such a section may lack faces or merge two, so the aspects may be split or joined
+    wrongly: the result says so (status "inaccurate", the orientation named), aspects kept.
+    The 3-RPR's sections at phi = 0 made to report a stalled curve."""
+    import dataclasses
+    import sys
+
+    mod = sys.modules["optkin.analysis.aspects"]  # (optkin.analysis.aspects: the function)
+    real = mod.aspects
+    m = optkin.mechanisms.rpr3(BASE3, PLAT3)
+    kw = dict(limits=LIMITS, slices=4, min_gap=10.0, modes=False)  # 4 sections, no refinement
+    clean = aspects3d(m, **kw)
+    assert clean.success and clean.status == "optimal" and "stopped early" not in clean.message
+
+    def stalled_at_zero(*args, **kwargs):
+        r = real(*args, **kwargs)
+        if kwargs["fixed"]["phi"] == 0.0:
+            c = r.curves.curves[0]
+            r.curves.curves[0] = dataclasses.replace(c, ends=(c.ends[0], "stalled"))
+        return r
+
+    monkeypatch.setattr(mod, "aspects", stalled_at_zero)
+    res = aspects3d(m, **kw)
+    assert not res.success and res.status == "inaccurate"
+    assert "the curves of 1 section(s) stopped early" in res.message and "phi = 0" in res.message
+    assert len(res) == len(clean)

@@ -39,7 +39,10 @@ base of side 10 and platform of circumradius 2, links 5 and 4; tests/test_aspect
 154.80, 148.44-148.45, 107.63-107.64 and 101.31 (101.24 at 160^3). A design whose legs
 fold completely (links of equal length: the inner serial circle shrinks to the base
 joint, where the leg's inverse is singular) is not handled reliably: with links 5 and 5
-some sections' curves stopped early near phi = +-1.4 and the aspects fell apart.
+the curves of 86 of 198 sections stopped early near phi = +-1.4 and the aspects fell apart
+into hundreds of pieces; the result then says so (status ``"inaccurate"``, the first such
+orientation named), as it does for any section whose curves stopped early (none on the
+3-RPR and the 3-RRR above).
 """
 
 from __future__ import annotations
@@ -53,7 +56,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..mechanism import Mechanism
 from ..model import get_model
-from ..results import OPTIMAL, TIME_LIMIT, jsonable
+from ..results import INACCURATE, OPTIMAL, TIME_LIMIT, jsonable
 from .planar import Face, face_arc_area, point_in_face
 
 __all__ = ["Aspect3D", "Aspects3D", "aspects3d", "ASPECTS3D_DEFAULTS"]
@@ -124,7 +127,9 @@ class Aspects3D:
         The orientations of the sections.
     success, status, message :
         As every result (:mod:`optkin.results`): ``"optimal"``; a section's status when
-        one failed; ``"time_limit"`` when refinement stopped at the time limit.
+        one failed; ``"time_limit"`` when refinement stopped at the time limit;
+        ``"inaccurate"`` (the aspects still given) when some section's curves stopped
+        early, so that faces may be missing or merged there.
     """
 
     mechanism: str
@@ -305,6 +310,8 @@ class _Section:
     status: str
     message: str
     faces: list[tuple[tuple[int, ...], int, Face, np.ndarray]]
+    #: some of its curves stopped early (stalled, max_steps, jumped to another curve)
+    early: bool = False
 
 
 class _Find:
@@ -415,8 +422,12 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     def section(phi: float) -> _Section:
         if phi not in cache:  # only the faces are kept (a 3-RRR section's curves: ~20 MB)
             r = aspects(mech, fixed={angle: phi}, limits=limits, bounds=bounds, step=step)
+            early = r.curves is not None and any(
+                any(e in c.ends for e in ("max_steps", "stalled", "jumped"))
+                for c in r.curves.curves)
             cache[phi] = _Section(r.success, r.status, r.message,
-                                  [(a.working_mode, a.det_sign, a.face, a.v) for a in r.aspects])
+                                  [(a.working_mode, a.det_sign, a.face, a.v) for a in r.aspects],
+                                  early)
         return cache[phi]
 
     def faces(phi):
@@ -552,14 +563,23 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     if modes:
         _count_modes(mech, free, out, order)
     n = len(out)
+    # a section whose curves stopped early may lack faces or merge two (their areas still
+    # add up): aspects then split or join wrongly. None did on the 3-RPR and 3-RRR of the
+    # tests; a 3-RRR whose links are equal (legs folding onto their base joints) had such
+    # sections near phi = +-1.4 and fell apart into 897 pieces
+    early = [p for p in order if cache[p].early]
     msg = (f"{n} aspect(s) of {mech.name} in (x, y, {angle}) from {len(order)} sections "
            f"({int(slices)} even, {len(order) - int(slices)} added where the sections' faces "
            f"change); volumes {[round(a.volume, 6) for a in out]}"
            + (f"; {slivers} face(s) of the sections' sliver size seen in one section only "
               "(below the resolution) not counted" if slivers else "")
+           + (f"; the curves of {len(early)} section(s) stopped early (stalled, max_steps or "
+              f"jumped to another curve; the first at {angle} = {early[0]:.6g}): faces may be "
+              "missing or merged there, so aspects may be split or joined wrongly; a smaller "
+              "step may help" if early else "")
            + ("; refinement stopped at the time limit: counts may be wrong" if late else ""))
-    return Aspects3D(mech.name, out, np.array(order), not late,
-                     TIME_LIMIT if late else OPTIMAL, msg,
+    status = TIME_LIMIT if late else INACCURATE if early else OPTIMAL
+    return Aspects3D(mech.name, out, np.array(order), status == OPTIMAL, status, msg,
                      time.perf_counter() - t0, (model.x_names[0], model.x_names[1], angle))
 
 
