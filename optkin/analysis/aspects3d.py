@@ -31,8 +31,9 @@ topology-changing orientations and a faster section are the next steps (see the 
 tracker). An aspect whose whole extent in phi is shorter than ``min_gap`` may be
 missed, and a neck thinner than it in phi may join or split aspects.
 
-Legs with several postures (3-RRR, 3-PRR) get their aspects per working mode the same
-way, at the sections' finer default step (see ``step``). Measured on a 3-RRR (equilateral
+Legs with several postures get their aspects per working mode the same way, at the
+sections' finer default step (see ``step``): tested on the 3-RRR (the 3-PRR takes the
+same path, not compared with a grid yet). Measured on a 3-RRR (equilateral
 base of side 10 and platform of circumradius 2, links 5 and 4; tests/test_aspects3d.py):
 16 aspects, two per working mode, volumes 154.77 (2), 148.50 (6), 107.71 (6) and 101.44
 (2) from 143 sections, about 170 s here, against a 200^3 voxel grid's 16 components,
@@ -362,8 +363,8 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
         adapts to their turning). By default 0.25 when every actuator is its leg's length
         (3-RPR: the volumes then agree with a 240^3 grid to 4e-4, in half the time of
         0.08), else the sections' own default 0.08 (legs with a driven revolute or slider
-        add their serial circles, the inner one of radius ``|l1 - l2|``, which 0.25 does not
-        resolve: a 3-RRR's aspects fell apart into 64 pieces).
+        add their serial singularity curves: a 3-RRR's inner circle, of radius
+        ``|l1 - l2|``, which 0.25 does not resolve: its aspects fell apart into 64 pieces).
     time_limit : float
         Seconds (capped by the time budget); past it no gap is refined any more and the
         result says so (``success=False``, status ``"time_limit"``).
@@ -407,8 +408,8 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
         # legs whose actuator is their length (3-RPR) have no serial singularity: the
         # sections' curves are the parallel ones and the strokes' circles, which 0.25
         # resolves (volumes within 4e-4 of a 240^3 grid, half the time of 0.08). Legs with
-        # a driven revolute or slider (3-RRR, 3-PRR) add the legs' serial circles, the
-        # inner one as small as |l1 - l2|: at 0.25 a 3-RRR's (radius 1 in a mechanism of
+        # a driven revolute or slider (3-RRR, 3-PRR) add their serial singularity curves,
+        # a 3-RRR's inner circle as small as |l1 - l2|: at 0.25 that (radius 1 in a mechanism of
         # size 10) was under-resolved, sections dropped faces of area 12 and the aspects
         # fell apart into 64 pieces; at 0.08 the voxel grid's 16
         step = 0.25 if bool(np.all(chart.length_actuated)) else None
