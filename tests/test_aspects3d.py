@@ -21,11 +21,32 @@ from optkin.analysis.aspects3d import aspects3d
 LIMITS = {f"L{i}.rho": (10.0, 30.0) for i in (1, 2, 3)}
 
 
+def _components(free: np.ndarray, cell: float) -> list[float]:
+    """Volumes of the connected components of ``free`` (n, n, m) with the last axis
+    periodic, largest first."""
+    from scipy import ndimage
+
+    lab, nl = ndimage.label(free)
+    parent = list(range(nl + 1))
+
+    def root(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    a, b = lab[:, :, 0], lab[:, :, -1]  # phi is periodic: the two ends touch
+    both = (a > 0) & (b > 0)
+    for u, v in set(zip(a[both].tolist(), b[both].tolist())):
+        parent[root(u)] = root(v)
+    roots = np.array([root(i) for i in range(nl + 1)])
+    counts = np.bincount(roots[lab.ravel()], minlength=nl + 1)
+    return sorted((c * cell for r, c in enumerate(counts) if r > 0 and c > 0), reverse=True)
+
+
 def voxel_aspects(n: int, lo: float = -32.0, hi: float = 32.0):
     """Volumes of the components of {strokes in [10, 30], det A of one sign} on an n^3
     grid over [lo, hi]^2 x [-pi, pi), per sign, largest first."""
-    from scipy import ndimage
-
     xs = np.linspace(lo, hi, n)
     ph = np.linspace(-np.pi, np.pi, n, endpoint=False)
     cell = (xs[1] - xs[0]) ** 2 * (ph[1] - ph[0])
@@ -43,26 +64,7 @@ def voxel_aspects(n: int, lo: float = -32.0, hi: float = 32.0):
             rows.append(np.stack([dx, dy, Rb[0] * dy - Rb[1] * dx], -1))
         ok[:, :, k] = good
         sign[:, :, k] = np.sign(np.linalg.det(np.stack(rows, -2)))
-    out = {}
-    for sg in (1, -1):
-        lab, nl = ndimage.label(ok & (sign == sg))
-        parent = list(range(nl + 1))
-
-        def root(a, parent=parent):
-            while parent[a] != a:
-                parent[a] = parent[parent[a]]
-                a = parent[a]
-            return a
-
-        a, b = lab[:, :, 0], lab[:, :, -1]  # phi is periodic: the two ends touch
-        both = (a > 0) & (b > 0)
-        for u, v in set(zip(a[both].tolist(), b[both].tolist())):
-            parent[root(u)] = root(v)
-        roots = np.array([root(i) for i in range(nl + 1)])
-        counts = np.bincount(roots[lab.ravel()], minlength=nl + 1)
-        out[sg] = sorted((c * cell for r, c in enumerate(counts) if r > 0 and c > 0),
-                         reverse=True)
-    return out
+    return {sg: _components(ok & (sign == sg), cell) for sg in (1, -1)}
 
 
 @pytest.mark.slow
@@ -88,29 +90,6 @@ def test_cuspidal_3rpr_aspects_against_a_voxel_grid():
 #: and distal 4: each leg's platform point within the annulus 1 <= |P - A| <= 9.
 RRR_BASE = [[0.0, 0.0], [10.0, 0.0], [5.0, 5.0 * np.sqrt(3.0)]]
 RRR_PLAT = [[2 * np.cos(a), 2 * np.sin(a)] for a in (7 * np.pi / 6, -np.pi / 6, np.pi / 2)]
-
-
-def _components(free: np.ndarray, cell: float) -> list[float]:
-    """Volumes of the connected components of ``free`` (n, n, m) with the last axis
-    periodic, largest first."""
-    from scipy import ndimage
-
-    lab, nl = ndimage.label(free)
-    parent = list(range(nl + 1))
-
-    def root(a):
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
-    a, b = lab[:, :, 0], lab[:, :, -1]
-    both = (a > 0) & (b > 0)
-    for u, v in set(zip(a[both].tolist(), b[both].tolist())):
-        parent[root(u)] = root(v)
-    roots = np.array([root(i) for i in range(nl + 1)])
-    counts = np.bincount(roots[lab.ravel()], minlength=nl + 1)
-    return sorted((c * cell for r, c in enumerate(counts) if r > 0 and c > 0), reverse=True)
 
 
 def rrr_voxels(n: int, l1: float = 5.0, l2: float = 4.0):

@@ -423,16 +423,19 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     def section(phi: float) -> _Section:
         if phi not in cache:  # only the faces are kept (a 3-RRR section's curves: ~20 MB)
             r = aspects(mech, fixed={angle: phi}, limits=limits, bounds=bounds, step=step)
-            early = r.curves is not None and any(
-                any(e in c.ends for e in ("max_steps", "stalled", "jumped"))
-                for c in r.curves.curves)
             cache[phi] = _Section(r.success, r.status, r.message,
                                   [(a.working_mode, a.det_sign, a.face, a.v) for a in r.aspects],
-                                  early)
+                                  r.curves is not None and r.curves.stopped_early)
         return cache[phi]
 
     def faces(phi):
         return section(phi).faces
+
+    def sliver(phi: float, i: int) -> bool:
+        """Face i of the section at phi is about the sections' sliver size (or a tiny
+        fraction of its largest face): one section may keep it and the next drop it."""
+        big = max(f[2].area for f in faces(phi))
+        return faces(phi)[i][2].area <= max(tiny * big, 2 * floor)
 
     free = _FreeTest(mech, model, limits)
     rng = np.random.default_rng(0)
@@ -495,12 +498,9 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
         pairs, ua, ub = links(a, b)
         wa = ((a + np.pi) % (2 * np.pi)) - np.pi
         wb = ((b + np.pi) % (2 * np.pi)) - np.pi
-        big_a = max((f[2].area for f in faces(wa)), default=0.0)
-        big_b = max((f[2].area for f in faces(wb)), default=0.0)
         # a face near the sections' sliver threshold may be kept in one section and
         # dropped in the next: its lack of a partner is no event to locate
-        large = any(faces(wa)[i][2].area > max(tiny * big_a, 2 * floor) for i in ua) or any(
-            faces(wb)[j][2].area > max(tiny * big_b, 2 * floor) for j in ub)
+        large = any(not sliver(wa, i) for i in ua) or any(not sliver(wb, j) for j in ub)
         if not large or b - a <= min_gap:
             done_gaps.append((a, b, pairs))
             continue
@@ -535,9 +535,7 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
             # next drops, so the refinement does not locate it) seen in one section only:
             # below the resolution, not an aspect (a 3-RRR's: areas 0.013-0.016 for a
             # floor of 0.013, 16 of them beside the grid's 16 aspects)
-            p, i = members[0]
-            big = max(f[2].area for f in faces(p))
-            if faces(p)[i][2].area <= max(tiny * big, 2 * floor):
+            if sliver(*members[0]):
                 slivers += 1
                 continue
         secs = [(p, faces(p)[i]) for p, i in members]

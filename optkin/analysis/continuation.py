@@ -376,6 +376,10 @@ class Curve:
                 "points": self.points.tolist()}
 
 
+#: How a curve ends when it stopped early (:attr:`SingularCurves.stopped_early`).
+_EARLY = ("max_steps", "stalled", "jumped")
+
+
 @dataclass
 class SingularCurves:
     """The singular loci of a mechanism in a plane (see :func:`singular_curves`).
@@ -421,6 +425,12 @@ class SingularCurves:
     @property
     def max_residual(self) -> float:
         return float(max((np.max(c.residual) for c in self.curves), default=0.0))
+
+    @property
+    def stopped_early(self) -> bool:
+        """Some curve stopped before closing or leaving the box (stalled, max_steps or
+        jumped to another curve): a region it should bound may be missing or merged."""
+        return any(e in _EARLY for c in self.curves for e in c.ends)
 
     def __len__(self) -> int:
         return len(self.curves)
@@ -1411,7 +1421,7 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     if budget.reason is not None:
         ok, status = False, budget.reason
         msg += "; " + budget.message(where)
-    if any("max_steps" in c.ends or "stalled" in c.ends or "jumped" in c.ends for c in curves):
+    if any(e in _EARLY for c in curves for e in c.ends):
         msg += "; some curves stopped early (stalled, max_steps or jumped to another curve)"
     per_plane = tuple(bool(p and (b[1] - b[0]) >= TWO_PI - 1e-9) for p, b in zip(per2, bounds_arr))
     return SingularCurves(
