@@ -411,7 +411,7 @@ def _region_faces(chart, curves, mode, bounds, snap, pidx, fixed_map, lim_map, w
     # polylines: faces smaller than a fraction of a step squared are dropped
     min_area = min_face_area(snap)
     for f in faces(lines, snap=snap):
-        if f.point is None or f.area < min_area:
+        if f.area < min_area or f.point is None:  # (the point is computed when read)
             continue
         v, d = _label(chart, pidx, fixed_map, f.point, mode, lim_map)
         if v is None:
