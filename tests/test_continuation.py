@@ -560,3 +560,55 @@ def test_faces_of_overlapping_copies_of_a_curve():
     disc = ring_area(copies[0][0])
     assert len(out) == 2
     assert np.allclose(out, sorted([disc, 36 - disc]), atol=1e-3)
+
+
+@pytest.mark.parametrize("phi", [0.3, -2.0])
+def test_rpr3_limit_curves_in_closed_form(rpr, monkeypatch, phi):
+    """A 3-RPR's stroke-limit curves at a fixed orientation come from the legs' circles
+    (continuation.CLOSED_FORM_LIMITS): every vertex has its leg at the limit, written here
+    as |p + R b_i - a_i| = rho, and lies in the box; the curves cover the part of each
+    circle inside the box, found here by sampling 20000 angles; and the curves traced by
+    continuation (the flag off) lie on them, within the sagitta of the closed form's chords."""
+    from optkin.analysis import continuation as cont
+
+    lims = {f"L{i}.rho": (10.0, 30.0) for i in (1, 2, 3)}
+    c, s = np.cos(phi), np.sin(phi)
+    R = np.array([[c, -s], [s, c]])
+
+    def curves(flag):
+        monkeypatch.setattr(cont, "CLOSED_FORM_LIMITS", flag)
+        sc = optkin.singular_curves(rpr, plane="workspace", kind="limit",
+                                    fixed={"phi": phi}, limits=lims, step=0.25)
+        assert sc.success, sc.message
+        return sc
+
+    closed_form, traced = curves(True), curves(False)
+    lo, hi = closed_form.bounds[:, 0], closed_form.bounds[:, 1]
+    for i in range(3):
+        for rho in (10.0, 30.0):
+            mine = [cv for cv in closed_form.curves if cv.kind == f"limit:{i}"
+                    and abs(cv.v[0, i] - rho) < 1e-9]
+            assert mine, (i, rho)
+            P = np.vstack([cv.points for cv in mine])
+            assert np.all(P >= lo - 1e-9) and np.all(P <= hi + 1e-9)
+            lengths = np.linalg.norm(P + PLAT3[i] @ R.T - BASE3[i], axis=1)
+            assert np.max(np.abs(lengths - rho)) < 1e-9
+            # coverage: the angles of the circle inside the box, against the curves' arcs
+            centre = BASE3[i] - R @ PLAT3[i]
+            th = np.linspace(-np.pi, np.pi, 20000, endpoint=False)
+            Q = centre + rho * np.c_[np.cos(th), np.sin(th)]
+            inside = np.all((Q >= lo) & (Q <= hi), axis=1)
+            covered = 0.0
+            for cv in mine:
+                a = np.unwrap(np.arctan2(*(cv.points - centre).T[::-1]))
+                covered += abs(a[-1] - a[0]) + (np.abs(a[1] - a[0]) if cv.closed else 0.0)
+            assert abs(covered - inside.mean() * 2 * np.pi) < 2e-3 * 2 * np.pi, (i, rho)
+            # the traced curve's points lie on the closed form's polyline (chords of the
+            # circle: within their sagitta)
+            T = np.vstack([cv.points for cv in traced.curves if cv.kind == f"limit:{i}"
+                           and abs(cv.v[0, i] - rho) < 1e-9])
+            seg = max(float(np.max(np.linalg.norm(np.diff(cv.points, axis=0), axis=1)))
+                      for cv in mine)
+            d = np.min(np.linalg.norm(T[:, None] - P[None], axis=2), axis=1)
+            assert np.max(d) < seg, (np.max(d), seg)
+            assert np.max(np.abs(np.linalg.norm(T - centre, axis=1) - rho)) < 1e-9

@@ -473,10 +473,11 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
                 if not len(P):
                     continue
                 ok = free.vertical(P, p0, p1, d0, m0)
-                for pt in P[ok]:
-                    for j, (m1, d1, g, _) in enumerate(dst):
-                        if m1 == m0 and d1 == d0 and point_in_face(g, pt[None])[0]:
-                            pairs.add((j, i) if flip else (i, j))
+                if not ok.any():
+                    continue
+                for j, (m1, d1, g, _) in enumerate(dst):
+                    if m1 == m0 and d1 == d0 and point_in_face(g, P[ok]).any():
+                        pairs.add((j, i) if flip else (i, j))
         la = {i for i, _ in pairs}
         lb = {j for _, j in pairs}
         return sorted(pairs), set(range(len(fa))) - la, set(range(len(fb))) - lb

@@ -886,6 +886,106 @@ def _trace_all(tr: _Tracer, seeds: list[np.ndarray], dedup: float) -> list[tuple
     return out
 
 
+#: Limit curves of distance legs from their closed form (:func:`_limit_arcs`); False traces
+#: them by continuation like every other curve (kept for the tests that compare the two).
+CLOSED_FORM_LIMITS = True
+#: Their points lie this fraction of the step apart (in the scaled variables).
+LIMIT_SPACING = 0.5
+
+
+def _limit_arcs(chart: PlanarChart, tr: _Tracer, leg: int, lim: float,
+                fixed: dict[int, float], pidx: tuple[int, ...]
+                ) -> list[tuple[np.ndarray, bool, tuple[str, str]]] | None:
+    """The curve q_a,leg = lim of a section at a fixed orientation in the platform's (x, y),
+    in closed form, when every leg is a distance leg (a 3-RPR): leg ``leg``'s platform point
+    on its circle |P - C| = lim, so the platform's origin on the circle of the same radius
+    about C - P0 (P0: that point with the platform at the origin, in the section's
+    orientation), the other legs' lengths from their closed-form inverses. The same curve
+    as continuation traces, as ``_trace_all`` returns it: (points in the tracer's scaled
+    free variables, closed, ends), cut exactly where it leaves the plane's box, with points
+    every :data:`LIMIT_SPACING` step in the scaled variables (and at most 0.25 rad of
+    turning between points, as the tracer). None where this does not apply (legs with
+    postures, another section or plane): the caller traces it."""
+    sys = tr.sys
+    na = sys.na
+    if (not CLOSED_FORM_LIMITS or not bool(np.all(chart.length_actuated))
+            or chart.n_combos != 1
+            or set(fixed) != {na + j for j in chart.orientation}
+            or [pidx[0] - na, pidx[1] - na] not in (list(chart.translation),
+                                                    list(chart.translation)[::-1])
+            or any(tr.box_periodic)):
+        return None
+    free = np.array(sys.free_idx)
+    X0 = np.zeros((1, sys.nx))
+    for i, v in fixed.items():
+        X0[0, i - na] = v
+    qa = np.zeros((1, na))
+    qa[0, leg] = lim
+    C, r = chart.centres_radii(qa)
+    r = float(r[0, leg])
+    t = list(chart.translation)
+    centre = C[0, leg] - chart.platform_points(X0)[0, leg]  # the origin's circle, in (x, y)
+    if not (np.all(np.isfinite(centre)) and np.isfinite(r) and r > 0):
+        return None
+    # the plane's coordinates in the order of pidx
+    k = [t.index(pidx[0] - na), t.index(pidx[1] - na)]
+    c2 = centre[k]
+    bounds = np.asarray(tr.bounds, dtype=float)
+
+    def full(th: np.ndarray) -> tuple[np.ndarray, bool]:
+        X = np.repeat(X0, len(th), axis=0)
+        X[:, t] = centre + r * np.stack([np.cos(th), np.sin(th)], 1)
+        V, ok = next(iter(chart.full_points(X, leg, np.full(len(th), lim))))
+        return V, bool(np.all(ok) and np.all(np.isfinite(V)))
+
+    # where the circle crosses the box's edges: c + r (cos, sin)[axis] = edge
+    cuts = []
+    for ax in (0, 1):
+        for edge in bounds[ax]:
+            w = (edge - c2[ax]) / r
+            if abs(w) < 1.0:
+                a = math.acos(w) if ax == 0 else math.asin(w)
+                cuts += [a, -a] if ax == 0 else [a, math.pi - a]
+    cuts = np.sort(np.mod(np.array(cuts), 2 * np.pi))
+
+    def inside(th: float) -> bool:
+        p = c2 + r * np.array([math.cos(th), math.sin(th)])
+        return bool(np.all(p >= bounds[:, 0]) and np.all(p <= bounds[:, 1]))
+
+    if len(cuts) == 0:
+        runs = [(0.0, 2 * np.pi, True)] if inside(0.0) else []
+    else:
+        ends = np.r_[cuts, cuts[0] + 2 * np.pi]
+        runs = [(a, b, False) for a, b in zip(ends[:-1], ends[1:])
+                if b - a > 1e-12 and inside(0.5 * (a + b))]
+    out = []
+    for a, b, closed in runs:
+        # the run sampled finely, then points every LIMIT_SPACING step of its arc in the
+        # scaled variables (and more where it turns by more than 0.25 rad between points)
+        tf = np.linspace(a, b, 257)
+        V, ok = full(tf)
+        if not ok:  # a leg without its closed form somewhere: trace the curves instead
+            return None
+        U = V[:, free] / tr.scl
+        D = np.diff(U, axis=0)
+        D[:, tr.per] = _wrap(D[:, tr.per])
+        seg = np.linalg.norm(D, axis=1)
+        arc = np.r_[0.0, np.cumsum(seg)]
+        T = D / np.where(seg > 0, seg, 1.0)[:, None]
+        turn = float(np.sum(np.arccos(np.clip(np.einsum("ij,ij->i", T[:-1], T[1:]), -1, 1))))
+        n = max(int(np.ceil(arc[-1] / (LIMIT_SPACING * tr.hmax))), int(np.ceil(turn / 0.25)),
+                3 if closed else 1)
+        tk = np.interp(np.linspace(0.0, arc[-1], n + 1), arc, tf)
+        if closed:
+            tk = tk[:-1]
+        V, ok = full(tk)
+        if not ok:
+            return None
+        out.append((V[:, free] / tr.scl, closed,
+                    ("closed", "closed") if closed else ("boundary", "boundary")))
+    return out
+
+
 # ---------------------------------------------------------------------------------------
 # seeds from closed-form charts of the configuration manifold
 # ---------------------------------------------------------------------------------------
@@ -1358,19 +1458,24 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
     for (cond, lim), sys in zip(conds, systems):
         if budget.exhausted():
             break
-        if chart is not None:
-            seeds_v = _seeds_chart(sys, chart, cond, fixed_map, lim, n, bounds_full)
-        elif cond == "parallel":
-            seeds_v = _seeds_newton_parallel(mech, names, max(8, n // 2), n, hmax, budget)
-        else:
-            seeds_v = _seeds_newton(sys, fixed_map, n, rng, budget)
         tr = _Tracer(sys, pvals, lim, pidx, bounds_arr, hmax, tol, max_steps, budget)
-        free = np.array(sys.free_idx)
-        seeds_u = [v[free] / tr.scl for v in seeds_v]
-        n_seeds += len(seeds_u)
-        if not seeds_u:
-            messages.append(f"{cond}: no seed found")
-        traced = _trace_all(tr, seeds_u, dedup=0.3 * hmax)
+        traced = (_limit_arcs(chart, tr, int(cond.split(":")[1]), lim, fixed_map, pidx)
+                  if chart is not None and cond.startswith("limit:") else None)
+        if traced is None:
+            if chart is not None:
+                seeds_v = _seeds_chart(sys, chart, cond, fixed_map, lim, n, bounds_full)
+            elif cond == "parallel":
+                seeds_v = _seeds_newton_parallel(mech, names, max(8, n // 2), n, hmax, budget)
+            else:
+                seeds_v = _seeds_newton(sys, fixed_map, n, rng, budget)
+            free = np.array(sys.free_idx)
+            seeds_u = [v[free] / tr.scl for v in seeds_v]
+            n_seeds += len(seeds_u)
+            if not seeds_u:
+                messages.append(f"{cond}: no seed found")
+            traced = _trace_all(tr, seeds_u, dedup=0.3 * hmax)
+        else:
+            n_seeds += len(traced)
         for Z, closed, ends in traced:
             if len(Z) < 2:
                 continue

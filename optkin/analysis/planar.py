@@ -447,7 +447,6 @@ def _interior_point(f: Face) -> np.ndarray | None:
     segA = np.vstack([r for r in allr])
     segB = np.vstack([np.roll(r, -1, axis=0) for r in allr])
     size = np.sqrt(max(f.area, 1e-300))
-    cands = []
     Rn = np.roll(R, -1, axis=0)
     mids = 0.5 * (R + Rn)
     tang = Rn - R
@@ -456,13 +455,20 @@ def _interior_point(f: Face) -> np.ndarray | None:
     ok = ln > 0
     nrm[ok] /= ln[ok, None]
     step = max(1, len(R) // 40)
-    for frac in (0.2, 0.05, 0.01, 1e-3):
+    # offsets from the edges' midpoints, the deepest first; a point offset by frac * size
+    # from its edge's midpoint is at most that far from the boundary, so once the best so
+    # far is at least the next offset, no later candidate can beat it (the same point as
+    # trying them all: ties go to the earlier candidate either way)
+    best, best_d = None, -np.inf
+    fracs = (0.2, 0.05, 0.01, 1e-3)
+    for frac in fracs:
+        if best is not None and best_d >= frac * size:
+            break
         C = mids[::step] + frac * size * nrm[::step]
-        cands.append(C)
-    C = np.vstack(cands)
-    inside = point_in_face(f, C)
-    if not inside.any():
-        return None
-    C = C[inside]
-    dist = _seg_dist(C, segA, segB)
-    return C[int(np.argmax(dist))]
+        C = C[point_in_face(f, C)]
+        if len(C):
+            dist = _seg_dist(C, segA, segB)
+            j = int(np.argmax(dist))
+            if dist[j] > best_d:
+                best, best_d = C[j], float(dist[j])
+    return best
