@@ -48,14 +48,19 @@ def _chunked(model: Any, key: str, X: np.ndarray) -> list[np.ndarray]:
     mapped over at most CHUNK points at a time (memory stays bounded), the maps built once
     per topology for chunks of 2^k points."""
     N = X.shape[0]
-    f = model.cached(("planar_chart", key), lambda: _dense(_build(model, key)))
+    # compiled in the background once per topology, the interpreted Function answering
+    # meanwhile (a 3-RRR's leg inverses: 11 of the 81 s of its 3-D aspects interpreted)
+    late = model.cached(("planar_chart", key), lambda: cc.LateCompiled(
+        f"chart:{model.topology.key}:{key}", _dense(_build(model, key))))
+    late.poll()
+    f = late.f
     n = 1
     while n < min(N, CHUNK):
         n *= 2
     # through preallocated buffers (a numpy call of a Function costs 0.1-0.4 ms); one
-    # FastFn per topology and size (the geometry an input), its calls serialised (its
-    # buffers are shared)
-    fm, lock = model.cached(("planar_chart", key, n), lambda: (
+    # FastFn per topology, size and build (the geometry an input), its calls serialised
+    # (its buffers are shared)
+    fm, lock = model.cached(("planar_chart", key, n, f.is_a("External")), lambda: (
         cc.FastFn(cc.map_shared(f, f"{f.name()}_{n}", n, [1])), threading.Lock()))
     p = np.asarray(model.p, dtype=float)
     rows = [f.size1_out(j) for j in range(f.n_out())]

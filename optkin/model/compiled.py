@@ -821,6 +821,69 @@ def start_library(tag: str, funcs: Sequence[ca.Function], source: Any = None,
     return PendingLibrary(tag, key, path, funcs, proc, source=source, flags=flags)
 
 
+class LateCompiled:
+    """A Function compiled in the background (:func:`start_library`):
+    until its library lands the interpreted Function answers; its maps (through call
+    buffers, one per width) are rebuilt once when the compiled code takes over."""
+
+    def __init__(self, tag: str, f: ca.Function, build: bool = True) -> None:
+        self.f = f
+        self.tag = tag
+        self.pending: Any = None
+        self._maps: dict[int, Any] = {}
+        #: whether its build is yet to be started (``build=False``: a cached library is
+        #: loaded, none is built until :meth:`start`)
+        self.deferred = False
+        if not build:
+            lib = library(tag, [f], build=False)
+            if lib is not None:
+                self.f = lib[f.name()]
+                self.compiled = True
+                return
+            self.deferred = True
+            self.compiled = (compile_mode() != "off" and cache_dir() is not None
+                             and find_compiler() is not None)
+            return
+        lib = start_library(tag, [f])
+        if isinstance(lib, dict):
+            self.f = lib[f.name()]
+        elif lib is not None:
+            self.pending = lib
+        #: whether a compiler is (or will be) behind it (False: none available)
+        self.compiled = lib is not None
+
+    def start(self) -> None:
+        """Start the build deferred at construction (nothing when there is none)."""
+        if not self.deferred:
+            return
+        self.deferred = False
+        lib = start_library(self.tag, [self.f])
+        if isinstance(lib, dict):
+            self.f = lib[self.f.name()]
+            self._maps = {}
+        elif lib is not None:
+            self.pending = lib
+
+    def poll(self) -> None:
+        """Switch to the compiled Function once its build has finished."""
+        if self.pending is not None:
+            done = self.pending.poll()
+            if done is not None:
+                self.pending = None
+                if done is not False:
+                    self.f = done[self.f.name()]
+                    self._maps = {}
+
+    def mapped(self, N: int, make: Any, part: int = 0) -> Any:
+        """The call buffer of ``make(f, N)`` (a map of the current Function over N); one
+        per ``part``, for calls from several threads at once."""
+        self.poll()
+        fm = self._maps.get((N, part))
+        if fm is None:
+            fm = self._maps[(N, part)] = FastFn(make(self.f, N))
+        return fm
+
+
 #: Columns of the inner map of :func:`map_shared`.
 _INNER = 64
 

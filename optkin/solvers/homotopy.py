@@ -98,75 +98,6 @@ def _squared(e: ca.SX) -> ca.SX:
     return e
 
 
-class _LateCompiled:
-    """A Function compiled in the background (:func:`optkin.model.compiled.start_library`):
-    until its library lands the interpreted Function answers; its maps (through call
-    buffers, one per width) are rebuilt once when the compiled code takes over."""
-
-    def __init__(self, tag: str, f: ca.Function, build: bool = True) -> None:
-        from ..model import compiled as cc
-
-        self.f = f
-        self.tag = tag
-        self.pending: Any = None
-        self._maps: dict[int, Any] = {}
-        #: whether its build is yet to be started (``build=False``: a cached library is
-        #: loaded, none is built until :meth:`start`)
-        self.deferred = False
-        if not build:
-            lib = cc.library(tag, [f], build=False)
-            if lib is not None:
-                self.f = lib[f.name()]
-                self.compiled = True
-                return
-            self.deferred = True
-            self.compiled = (cc.compile_mode() != "off" and cc.cache_dir() is not None
-                             and cc.find_compiler() is not None)
-            return
-        lib = cc.start_library(tag, [f])
-        if isinstance(lib, dict):
-            self.f = lib[f.name()]
-        elif lib is not None:
-            self.pending = lib
-        #: whether a compiler is (or will be) behind it (False: none available)
-        self.compiled = lib is not None
-
-    def start(self) -> None:
-        """Start the build deferred at construction (nothing when there is none)."""
-        from ..model import compiled as cc
-
-        if not self.deferred:
-            return
-        self.deferred = False
-        lib = cc.start_library(self.tag, [self.f])
-        if isinstance(lib, dict):
-            self.f = lib[self.f.name()]
-            self._maps = {}
-        elif lib is not None:
-            self.pending = lib
-
-    def poll(self) -> None:
-        """Switch to the compiled Function once its build has finished."""
-        if self.pending is not None:
-            done = self.pending.poll()
-            if done is not None:
-                self.pending = None
-                if done is not False:
-                    self.f = done[self.f.name()]
-                    self._maps = {}
-
-    def mapped(self, N: int, make: Any, part: int = 0) -> Any:
-        """The call buffer of ``make(f, N)`` (a map of the current Function over N); one
-        per ``part``, for calls from several threads at once."""
-        from ..model.compiled import FastFn
-
-        self.poll()
-        fm = self._maps.get((N, part))
-        if fm is None:
-            fm = self._maps[(N, part)] = FastFn(make(self.f, N))
-        return fm
-
-
 class _Base:
     """A square system H(x; theta) made complex and compiled: its value, x-Jacobian and
     derivative along a direction of theta, evaluated over rows by :meth:`eval` (the
@@ -192,7 +123,7 @@ class _Base:
         # a 3-RPR's 0.3 s): meanwhile the interpreted Function answers, with the same
         # numbers (no linear solve inside, nothing it could raise on that the compiled
         # code would not), so that a topology's first call does not wait for the compiler
-        self._fn = _LateCompiled(f"homotopy:{tag}", self.f_sx)
+        self._fn = cc.LateCompiled(f"homotopy:{tag}", self.f_sx)
         #: whether a compiler is (or will be) behind the system (False: none available)
         self.compiled = self._fn.compiled
         self.scale = np.asarray(scale, dtype=float)
@@ -691,8 +622,8 @@ class _Tracker:
         from ..model import lanes as _lanes
 
         defer = lanes_ok and _lanes.cpu_key() is not None
-        self._chunk = _LateCompiled(f"homotopy_track:{sys.key}:{predictor}", chunk,
-                                    build=not defer)
+        self._chunk = cc.LateCompiled(f"homotopy_track:{sys.key}:{predictor}", chunk,
+                                      build=not defer)
         #: whether a compiler is (or will be) behind the chunk (False: none available)
         self.compiled = self._chunk.compiled
         # larger systems: the same chunk for eight paths at once (SIMD lanes,
