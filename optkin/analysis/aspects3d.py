@@ -21,22 +21,25 @@ integral the trapezoid rule less its curvature term (:func:`_integrate`); its bo
 box and a representative configuration come from its faces.
 
 Measured on the cuspidal 3-RPR of Zein, Wenger and Chablat with strokes [10, 30]
-(tests/test_aspects3d.py): 2 aspects of volumes 2097.5 and 2069.7 (length^2 rad) from
-36 even sections and 52 added, 7-9 s here; the same with 144 sections at step 0.08
-(50 s): 2097.0 and 2068.7; voxel grids of the sign of det A find the same two
-components, 2097.7 and 2069.5 at 240^3 (4 s), 2096.6 and 2068.2 at 320^3 (11 s), 2097.4
-and 2068.7 at 400^3 (23 s). The method is exact in x and y but not in phi, and slow
-(0.09 s per section, mostly the continuation of every section's curves): the exact
-topology-changing orientations and a faster section are the next steps (see the issue
-tracker). An aspect whose whole extent in phi is shorter than ``min_gap`` may be
-missed, and a neck thinner than it in phi may join or split aspects.
+(tests/test_aspects3d.py): 2 aspects of volumes 2097.05 and 2069.25 (length^2 rad) from
+36 even sections and 52 added, 3.2-4.4 s here (benchmarks/test_aspects3d.py); 144
+sections at step 0.08 give 2097.0 and 2068.7; voxel grids of the sign of det A find the
+same two components, 2097.7 and 2069.5 at 240^3 (3.6 s), 2096.6 and 2068.2 at 320^3
+(11 s), 2097.4 and 2068.7 at 400^3 (23 s). The strokes' limit curves of its sections
+come in closed form (the legs' circles), the parallel curves by continuation. The method
+is exact in x and y but not in phi, and no faster than the 240^3 grid yet (about 40 ms
+per section: the parallel curves' continuation, point by point in Python, the faces of
+the arrangement and their labels): the exact topology-changing orientations and a
+batched section are the next steps (see the issue tracker). An aspect whose whole
+extent in phi is shorter than ``min_gap`` may be missed, and a neck thinner than it in
+phi may join or split aspects.
 
 Legs with several postures get their aspects per working mode the same way, at the
 sections' finer default step (see ``step``): tested on the 3-RRR (the 3-PRR takes the
 same path, not compared with a grid yet). Measured on a 3-RRR (equilateral
 base of side 10 and platform of circumradius 2, links 5 and 4; tests/test_aspects3d.py):
 16 aspects, two per working mode, volumes 154.77 (2), 148.50 (6), 107.71 (6) and 101.44
-(2) from 143 sections, about 170 s here, against a 200^3 voxel grid's 16 components,
+(2) from 143 sections, about 60 s here, against a 200^3 voxel grid's 16 components,
 154.80, 148.44-148.45, 107.63-107.64 and 101.31 (101.24 at 160^3). A design whose legs
 fold completely (links of equal length: the inner serial circle shrinks to the base
 joint, where the leg's inverse is singular) is not handled reliably: with links 5 and 5
