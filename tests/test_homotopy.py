@@ -340,12 +340,22 @@ def test_khalil_sr400_against_the_multistart():
             assert min(np.max(np.abs(np.angle(np.exp(1j * (r.x - q.x))))) for q in ref) < 1e-8
 
 
+def _tsai_3upu(angles=(92.0, 207.0, 338.0), rb=1.0, rp=0.45) -> optkin.Mechanism:
+    """Tsai's 3-UPU with legs at other angles than the library's (its own start system)."""
+    t = np.deg2rad(angles)
+    u = np.c_[np.cos(t), np.sin(t), np.zeros(3)]
+    legs = [{"type": "UPU", "base": (rb * u[i]).tolist(), "platform": (rp * u[i]).tolist(),
+             "axis": [-u[i, 1], u[i, 0], 0.0], "arm": (-u[i]).tolist()} for i in range(3)]
+    return optkin.Mechanism.from_legs(legs, "spatial", name="3-UPU")
+
+
 def test_time_limit_stops_a_monodromy_that_does_not_end(monkeypatch, tmp_path):
-    """Tsai's 3-UPU written at joint level: monodromy keeps finding solutions (666 after
-    12 loops, 220 s); the call stops at the time budget, says so, and stores nothing."""
+    """A 3-UPU whose start system does not ship: its monodromy takes over a minute (84
+    orbits of 8 solutions); under a time budget of 2 s the call stops, says so, and
+    stores nothing."""
     monkeypatch.setenv("OPTKIN_TIME_BUDGET", "2")
     monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
-    m = optkin.mechanisms.upu3()
+    m = _tsai_3upu()
     modes = optkin.assembly_modes(m, [1.2, 1.2, 1.2], method="homotopy")
     assert not modes.complete and modes.info["status"] == "time_limit"
     assert modes.info["monodromy_stopped"] == "time"
@@ -545,3 +555,53 @@ def test_complex_elimination_against_numpy(n, k):
         X = np.array(Xr) + 1j * np.array(Xi)
         ref = np.linalg.solve(J, B)
         assert np.max(np.abs(X - ref)) <= 1e-9 * (1 + np.max(np.abs(ref))), trial
+
+
+def _rodrigues(w, a):
+    w = np.asarray(w, float) / np.linalg.norm(w)
+    K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+    return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+
+
+def test_the_3upu_symmetry_flips_both_universal_joints_of_a_leg():
+    """A universal joint's angles (a, b) and (a + pi, pi - b) point its outgoing axis the
+    same way, turned half a turn about it (Rodrigues' formula, here): flipping both joints
+    of a U-P-U leg leaves its ends in place. homotopy.symmetry finds exactly these maps on
+    Tsai's 3-UPU: the 7 non-empty sets of legs flipped, each leg's four angles mapped
+    (ua + pi, pi - ub, pi - va, vb + pi); the real closure is unchanged by them at random
+    configurations; mechanisms without such joints get the identity alone."""
+    rng = np.random.default_rng(0)
+    a1, a2 = np.array([0.0, 1.0, 0.0]), np.array([-1.0, 0.0, 0.0])
+    d = np.cross(a1, a2)
+    for a, b in rng.uniform(-np.pi, np.pi, (5, 2)):
+        R = _rodrigues(a1, a) @ _rodrigues(a2, b)
+        R2 = _rodrigues(a1, a + np.pi) @ _rodrigues(a2, np.pi - b)
+        assert np.allclose(R2, R @ _rodrigues(d, np.pi), atol=1e-12)
+    m = get_model(optkin.mechanisms.upu3())
+    sym = H.symmetry(m)
+    assert sym.order == 8
+    assert np.all(sym.sign[0] == 1) and np.all(sym.shift[0] == 0)
+    names = list(m.x_names)
+    flipped = set()
+    for sg, sh in zip(sym.sign[1:], sym.shift[1:]):
+        moved = np.flatnonzero((sg != 1) | (sh != 0))
+        legs = frozenset(names[i].split(".")[0] for i in moved)
+        for leg in legs:
+            ix = [names.index(f"{leg}.{v}") for v in ("ua", "ub", "va", "vb")]
+            assert sg[ix].tolist() == [1, -1, -1, 1]
+            assert np.allclose(np.cos(sh[ix]), -1.0)
+        assert len(moved) == 4 * len(legs)
+        flipped.add(legs)
+    assert len(flipped) == 7
+    qa = np.array([1.2, 1.1, 1.3])
+    for _ in range(3):
+        x = rng.normal(size=m.nx)
+        x[3:7] /= np.linalg.norm(x[3:7])
+        r0 = m.residual(qa, x)
+        assert np.max(np.abs(r0)) > 1e-2  # not a solution: the identity holds everywhere
+        for g in range(1, sym.order):
+            assert np.allclose(m.residual(qa, x * sym.sign[g] + sym.shift[g]), r0, atol=1e-12)
+    for mk in (optkin.mechanisms.rps3, lambda: optkin.mechanisms.rpr3(
+            [[0, 0], [1, 0], [0, 1]], [[0, 0], [0.3, 0], [0, 0.3]])):
+        assert H.symmetry(get_model(mk())).order == 1
+

@@ -50,8 +50,20 @@ a numpy loop over the paths (:func:`track`).
 
 The account: every path ends finite, at infinity, singular or failed; ``complete`` only when
 none failed, no two finite nonsingular endpoints coincide (path jumping) and the start
-system is known complete (its bound reached, or the trace test passed). Not yet here:
-endgames (a singular endpoint is only reported); see the issue tracker. Start systems of
+system is known complete (its bound reached, or the trace test passed). A path goes to
+infinity when its largest algebraic coordinate (an unknown, or the cos and sin of a
+periodic angle, whose size is exp |Im|) passes ``big`` near the target, or when it stops in
+the endgame zone (t >= :data:`ENDGAME`) large and growing like (1 - t)^-v, v estimated
+from the tangent there (:func:`_diverging`: the valuation an endgame estimates; Tsai's
+3-UPU at its own geometry has 96 such paths of 672, whose step size collapsed at |x| ~
+1e3). Not yet here: an endgame for singular endpoints (a path that stalls near a finite
+singular point is reported failed); see the issue tracker.
+
+Symmetries (:func:`symmetry`): where maps of the angles leave the system unchanged for
+every parameter of the family (flipping both universal joints of a U-P-U leg: 8 joint
+configurations of one pose on Tsai's 3-UPU), monodromy keeps whole orbits, and monodromy,
+the trace test and the parameter homotopy track one path per orbit, mapping its endpoint
+to the others (:func:`track_orbits`): the 3-UPU's 672 paths as 84. Start systems of
 the library's topologies ship with the package (:data:`SHIPPED`); others are stored in the
 compiled-code cache directory (``.npz``, no pickles); both are re-verified on loading
 (each stored solution must solve its system, nonsingular and distinct).
@@ -62,6 +74,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
+import math
 import os
 import time
 import weakref
@@ -170,6 +183,8 @@ class _System(_Base):
         # geometry vector has 349 entries, its leg equations read 36)
         # (the free symbols of F matched by identity: one traversal of the graph, 0.3 ms,
         # where a depends_on per entry took 34 ms on a 6-6 platform)
+        #: (m, n) which unknowns each row reads (the legs' private angles: :func:`symmetry`)
+        self.reads = np.array(ca.jacobian(F, st.x).sparsity(), dtype=bool)
         reads = {s.element_hash() for s in ca.symvar(F)}
         entries = ca.vertsplit(st.p)
         used = np.array([i for i, e in enumerate(entries) if e.element_hash() in reads], int)
@@ -401,6 +416,11 @@ class _Tracker:
             accept_tol = 1e-4 if fused else 1e-6
         from ..model import compiled as cc
 
+        # the periodic angles: the system is polynomial in their cos and sin, which pass
+        # ``big`` where |Im| > log(big) (Tsai's 3-UPU: paths to infinity at |Im| ~ 1e3,
+        # where cos overflowed long before |x| reached big)
+        per = np.flatnonzero(np.asarray(getattr(sys, "periodic", np.zeros(n, bool)), bool))
+
         def build() -> ca.Function:
             # the value and Jacobian (the corrector), the Jacobian and the parameter derivative
             # (the predictor): each without the work of the output it does not need
@@ -545,6 +565,8 @@ class _Tracker:
                 hgrow = ca.fmin(h * ca.fmin(ca.fmax(ratio, 0.5), 2.0), hmax)
             h1 = ca.if_else(run, ca.if_else(accept, hgrow, 0.5 * h), h)
             far = ca.mmax(absc(X1) / sc) > big
+            if per.size:  # an angle whose cos and sin pass big: Im > log(big)
+                far = ca.logic_or(far, ca.mmax(ca.fabs(X1[1][per.tolist()])) > math.log(big))
             code = ca.if_else(far, ca.if_else(t1 >= 0.99, 2, 3),
                               ca.if_else(ca.logic_and(ca.logic_not(accept), h1 < hmin), 3,
                                          ca.if_else(t1 >= 1.0, 1, 0)))
@@ -906,8 +928,10 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
                                                 sc, threads)
         if cond is None:  # polished already: the condition numbers in numpy
             cond = _endpoint_cond(sys, X, status, th1, sc)
+        _diverging(sys, X, status, t, th0, th1, gamma, sc)
         return _Paths(X, status, cond, t, steps)
     d = th1 - th0
+    per = np.flatnonzero(np.asarray(getattr(sys, "periodic", np.zeros(n, bool)), bool))
 
     def theta(t):
         s = gamma * t / (1 + (gamma - 1) * t)
@@ -970,12 +994,55 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
         # only near the target can a path go to infinity (before it, the parameters are
         # generic): a path that swings far out earlier has failed (another gamma)
         far = np.max(np.abs(X[act]) / sc, axis=1) > big
+        if per.size:  # an angle whose cos and sin pass big (see _Tracker)
+            far |= np.max(np.abs(X[act][:, per].imag), axis=1) > math.log(big)
         status[act[far & (t[act] >= 0.99)]] = "at_infinity"
         status[act[far & (t[act] < 0.99)]] = "failed"
         status[rej[h[rej] < hmin]] = "failed"
         status[act[(t[act] >= 1.0) & (status[act] == "running")]] = "finite"
     status[status == "running"] = "failed"
+    _diverging(sys, X, status, t, th0, th1, gamma, sc)
     return _polish(sys, X, status, t, steps, th1, sc)
+
+
+#: A path that stops in the endgame zone (t at least this) can be found to diverge.
+ENDGAME = 0.99
+#: ... when its largest algebraic coordinate is this large (scaled) and grows as
+#: (1 - t)^-v with v at least :data:`VALUATION`.
+FAR = 1e2
+VALUATION = 0.1
+
+
+def _diverging(sys, X, status, t, th0, th1, gamma, sc) -> None:
+    """Paths that stopped short of the target in the endgame zone on their way to
+    infinity, marked ``"at_infinity"`` in ``status`` (in place). Such a path's largest
+    algebraic coordinate y (an unknown, or the cos and sin of a periodic angle: exp |Im|)
+    grows like (1 - t)^-v near the target; the step size collapses long before |y|
+    reaches the tracker's ``big`` (Tsai's 3-UPU: |x| ~ 1e3 at t = 0.9998). v is estimated
+    from the tangent there, v = (1 - t) d log|y| / dt (the valuation of the path's
+    Puiseux series, as an endgame estimates it from its samples): a path to a finite
+    singular endpoint has v <= 0 in every coordinate that is large (the 3-UPU's diverging
+    paths: v = 1 or 2/3, at |y| of 1.4e3 to 2e4)."""
+    idx = np.flatnonzero((status == "failed") & (t >= ENDGAME) & (t < 1.0))
+    if not idx.size:
+        return
+    per = np.asarray(getattr(sys, "periodic", np.zeros(sys.n, bool)), bool)
+    x, tt = X[idx], t[idx]
+    d = th1 - th0
+    s = gamma * tt / (1 + (gamma - 1) * tt)
+    ds = gamma / (1 + (gamma - 1) * tt) ** 2
+    TH = th0[None, :] + s[:, None] * d[None, :]
+    _, J, Ht = sys.eval(x, TH, ds[:, None] * d[None, :])
+    with np.errstate(all="ignore"):
+        xd = -np.linalg.solve(J, Ht[..., None])[..., 0]
+        # log-size of each coordinate and its derivative in t
+        big = np.where(per[None, :], np.abs(x.imag), np.log(np.abs(x) / sc[None, :]))
+        dbig = np.where(per[None, :], np.sign(x.imag) * xd.imag, (xd / x).real)
+    k = np.argmax(np.where(np.isfinite(big), big, -np.inf), axis=1)
+    r = np.arange(idx.size)
+    v = (1 - tt) * dbig[r, k]
+    out = (big[r, k] >= math.log(FAR)) & np.isfinite(v) & (v >= VALUATION)
+    status[idx[out]] = "at_infinity"
 
 
 def _endpoint_cond(sys: _System, X, status, th1, sc) -> np.ndarray:
@@ -1037,6 +1104,134 @@ def _distinct(model, S: np.ndarray, Y: np.ndarray, tol: float = 1e-6) -> np.ndar
 
 
 # ---------------------------------------------------------------------------------------
+# symmetries: maps of the angles that leave the system unchanged
+# ---------------------------------------------------------------------------------------
+
+#: The maps of one angle tried: x -> s x + k pi, (s, k).
+_ANGLE_MAPS = ((1.0, 0.0), (1.0, 1.0), (-1.0, 0.0), (-1.0, 1.0))
+#: Legs with more private angles than this are not searched (4^k candidate maps).
+MAX_BLOCK = 6
+#: Groups larger than this are not used (their orbits would be tracked as they come).
+MAX_GROUP = 4096
+
+
+@dataclass(frozen=True)
+class Symmetry:
+    """A group of maps g(x) = sign * x + shift (shift a multiple of pi in some angles)
+    under which the homotopy system is invariant, H(g(x); theta) = H(x; theta), for every
+    x and every parameter of the homotopy's family (:func:`symmetry`). Row 0 is the
+    identity. A universal joint's two angles (a, b) and (a + pi, pi - b) point its
+    outgoing axis the same way, turned half a turn about it: flipping both universal
+    joints of a U-P-U leg leaves the leg's ends where they were (Tsai's 3-UPU: 8 joint
+    configurations for every pose). Monodromy, the trace test and the parameter homotopy
+    then track one solution per orbit and map its endpoint to the others (the paths of
+    g(x) are g of the paths of x)."""
+
+    sign: np.ndarray  # (G, n)
+    shift: np.ndarray  # (G, n)
+
+    @property
+    def order(self) -> int:
+        return int(self.sign.shape[0])
+
+    def apply(self, X: np.ndarray) -> np.ndarray:
+        """The images of the rows of X, (G N, n): all of X under each map in turn."""
+        X = np.asarray(X)
+        return (X[None, :, :] * self.sign[:, None, :] + self.shift[:, None, :]).reshape(
+            -1, X.shape[1])
+
+
+def symmetry(model) -> Symmetry:
+    """The symmetry group of the topology's homotopy system (:class:`Symmetry`; only the
+    identity when there is none), found once per topology: for each leg, the angles only
+    that leg's closure rows read, every map x -> +-x + k pi of them (4^k candidates, k at
+    most :data:`MAX_BLOCK`) kept when H is unchanged to 1e-10 at random complex points
+    and random parameters of the family (rigid legs: :func:`_random_theta`, and a point of
+    the straight segment between two of them, where the paths run); the group is the
+    product of the legs' maps."""
+    return model.topology.cached("homotopy:symmetry", lambda: _find_symmetry(model))
+
+
+def _find_symmetry(model) -> Symmetry:
+    import itertools
+
+    sys = _system(model)
+    n = sys.n
+    ident = Symmetry(np.ones((1, n)), np.zeros((1, n)))
+    if not np.any(sys.periodic):
+        return ident
+    rng = np.random.default_rng(5)
+    tha, thb = _random_theta(sys, model, rng), _random_theta(sys, model, rng)
+    ths = [tha, tha + (0.3 + 0.4j) * (thb - tha)]
+    xs = [rng.normal(size=n) + 1j * rng.normal(size=n) for _ in range(2)]
+    row_leg = np.asarray(model.topology.row_leg)
+    legs_maps = []
+    for leg in sorted(set(int(v) for v in row_leg if v >= 0)):
+        cols = [j for j in np.flatnonzero(sys.periodic)
+                if sys.reads[:, j].any() and set(row_leg[sys.reads[:, j]]) == {leg}]
+        if not cols or len(cols) > MAX_BLOCK:
+            continue
+        cand = np.array(list(itertools.product(range(len(_ANGLE_MAPS)), repeat=len(cols)))[1:])
+        sgn = np.ones((len(cand), n))
+        sft = np.zeros((len(cand), n))
+        for c, j in enumerate(cols):
+            sgn[:, j] = [_ANGLE_MAPS[k][0] for k in cand[:, c]]
+            sft[:, j] = [_ANGLE_MAPS[k][1] * np.pi for k in cand[:, c]]
+        keep = np.ones(len(cand), bool)
+        for th in ths:
+            for x in xs:
+                h0 = sys.eval(x[None], th[None], np.zeros((1, sys.nth), complex))[0][0]
+                X = x[None, :] * sgn + sft
+                TH = np.repeat(th[None], len(X), 0)
+                Hg = sys.eval(X, TH, np.zeros_like(TH))[0]
+                keep &= np.max(np.abs(Hg - h0), axis=1) <= 1e-10 * (1 + np.max(np.abs(h0)))
+        if keep.any():
+            legs_maps.append((np.vstack([np.ones((1, n)), sgn[keep]]),
+                              np.vstack([np.zeros((1, n)), sft[keep]])))
+    if not legs_maps or np.prod([len(m[0]) for m in legs_maps]) > MAX_GROUP:
+        return ident
+    sign, shift = ident.sign, ident.shift
+    for s2, k2 in legs_maps:  # the product: the legs' maps act on disjoint angles
+        sign = (sign[:, None, :] * s2[None, :, :]).reshape(-1, n)
+        shift = (shift[:, None, :] + k2[None, :, :]).reshape(-1, n)
+    return Symmetry(sign, shift)
+
+
+def _orbits(model, S: np.ndarray, sym: Symmetry) -> np.ndarray | None:
+    """Indices of one row of S per orbit of ``sym`` when S is a union of whole orbits of
+    ``sym.order`` distinct points each (else None: then every row is tracked)."""
+    if sym.order == 1:
+        return np.arange(len(S))
+    sc = np.asarray(model.x_scale, dtype=float)
+    C = _canonical(model, S)
+    left = np.ones(len(S), bool)
+    reps = []
+    for i in range(len(S)):
+        if not left[i]:
+            continue
+        img = _canonical(model, sym.apply(C[i:i + 1]))
+        hit = [int(np.argmin(d)) if np.min(d) < 1e-6 else -1
+               for d in (np.max(np.abs(C - y) / sc, axis=1) for y in img)]
+        if min(hit) < 0 or len(set(hit)) != sym.order or not left[hit].all():
+            return None
+        left[hit] = False
+        reps.append(i)
+    return np.asarray(reps, dtype=int)
+
+
+def track_orbits(sys: _System, sym: Symmetry, reps: np.ndarray, *args: Any,
+                 **kwargs: Any) -> _Paths:
+    """:func:`track` of the rows ``reps`` only, their endpoints mapped by every element of
+    ``sym`` (the paths of g(x) are g of the paths of x): (G N) paths, map-major."""
+    P = track(sys, reps, *args, **kwargs)
+    G = sym.order
+    if G == 1:
+        return P
+    return _Paths(sym.apply(P.x), np.tile(P.status, G), np.tile(P.cond, G), np.tile(P.t, G),
+                  P.steps)
+
+
+# ---------------------------------------------------------------------------------------
 # start systems by monodromy
 # ---------------------------------------------------------------------------------------
 
@@ -1065,6 +1260,21 @@ class StartSystem:
     @property
     def root_count(self) -> int:
         return int(self.solutions.shape[0])
+
+    def representatives(self, model) -> tuple[Symmetry, np.ndarray]:
+        """The topology's symmetry group and the indices of one solution per orbit (every
+        solution and the identity when the solutions are not whole free orbits), found
+        once per start system."""
+        got = self.__dict__.get("_reps")
+        if got is None:
+            sym = symmetry(model)
+            idx = _orbits(model, self.solutions, sym)
+            if idx is None:
+                n = self.solutions.shape[1]
+                sym, idx = Symmetry(np.ones((1, n)), np.zeros((1, n))), np.arange(
+                    self.root_count)
+            got = self.__dict__["_reps"] = (sym, idx)
+        return got
 
 
 _PATTERNS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -1183,7 +1393,14 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
     th = _random_theta(sys, model, rng, c=np.zeros(sys.n))
     H, _, _ = sys.eval(x0[None, :], th[None, :], np.zeros((1, sys.nth)))
     th[-sys.n:] = H[0]  # with c = 0, H(x0) = F(x0): c0 = F(x0) makes x0 a solution
-    S = _canonical(model, x0[None, :])
+    # with a symmetry group (:func:`symmetry`) S holds whole orbits and the loops track
+    # one solution of each (R): a new endpoint brings its orbit
+    sym = symmetry(model)
+    R = _canonical(model, x0[None, :])
+    S = _distinct(model, np.zeros((0, sys.n)), _canonical(model, sym.apply(R)))
+    if len(S) != sym.order:  # x0 a fixed point of some map (probability zero)
+        sym = Symmetry(np.ones((1, sys.n)), np.zeros((1, sys.n)))
+        S = R
     loops = 0
     out_of_time = False
     trace = None
@@ -1196,7 +1413,7 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
                 break
             loops += 1
             th1, th2 = _random_theta(sys, model, rng), _random_theta(sys, model, rng)
-            Y = S
+            Y = R
             for a, b in ((th, th1), (th1, th2), (th2, th)):
                 g = np.exp(2j * np.pi * rng.uniform())
                 P = track(sys, Y, a, b, g, tracker=tr, deadline=deadline, scale=sc)
@@ -1204,8 +1421,14 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
                 if Y.size == 0:
                     break
             new = _distinct(model, S, _canonical(model, Y)) if Y.size else np.zeros((0, sys.n))
-            if new.shape[0]:
-                S = np.vstack([S, new])
+            grew = False
+            for y in new:  # one orbit at a time: two new points may share one
+                orbit = _distinct(model, S, _canonical(model, sym.apply(y[None])))
+                if orbit.shape[0]:
+                    S = np.vstack([S, orbit])
+                    R = np.vstack([R, y[None]])
+                    grew = True
+            if grew:
                 quiet = 0
             else:
                 quiet += 1
@@ -1475,8 +1698,9 @@ def homotopy_modes(mech, qa: Any, seed: int = 0, start: StartSystem | None = Non
             tries += 1
             gamma = np.exp(2j * np.pi * GAMMA_SPREAD[min(tries, len(GAMMA_SPREAD)) - 1]
                            * rng.uniform(-1, 1))
-            Q = track(sys, start.solutions, start.theta, target, gamma, tracker=tr,
-                      deadline=deadline, scale=sc, threads=threads)
+            sym, reps = start.representatives(model)
+            Q = track_orbits(sys, sym, start.solutions[reps], start.theta, target, gamma,
+                             tracker=tr, deadline=deadline, scale=sc, threads=threads)
             a = tally(Q)
             if P is None or a[4] < acc[4]:
                 P, acc = Q, a
