@@ -605,3 +605,51 @@ def test_the_3upu_symmetry_flips_both_universal_joints_of_a_leg():
             [[0, 0], [1, 0], [0, 1]], [[0, 0], [0.3, 0], [0, 0.3]])):
         assert H.symmetry(get_model(mk())).order == 1
 
+
+def test_the_3upu_homotopy_accounts_for_every_path():
+    """Tsai's 3-UPU at joint level (19 unknowns): the shipped start system's 672
+    solutions (84 orbits of the legs' flips; not verified by the trace test, which the
+    result says), one path per orbit tracked. At the leg lengths of a translated platform
+    every path is accounted for (finite or, at Tsai's special geometry, diverging: the
+    endgame's valuation), none failed; every real solution closes each leg by the chain written in
+    test_assembly_modes_chains (its own Rodrigues products), comes in 8 joint
+    configurations of one pose, and the poses are the multistart's, with the two
+    translations at the three-sphere intersection."""
+    from test_assembly_modes_chains import three_spheres, upu_leg_frame
+
+    m = optkin.mechanisms.upu3()
+    a = 2 * np.pi * np.arange(3) / 3
+    u = np.c_[np.cos(a), np.sin(a), np.zeros(3)]
+    A, B, axis, arm = 1.0 * u, 0.5 * u, np.c_[-u[:, 1], u[:, 0], np.zeros(3)], -u
+    p0 = np.array([0.05, -0.02, 0.8])
+    rho = np.linalg.norm(p0 + B - A, axis=1)
+    hom = optkin.assembly_modes(m, rho, method="homotopy")
+    st = hom.stats
+    assert hom.info["root_count"] == 672 and st.failed == 0, hom.info["message"]
+    assert st.finite + st.at_infinity == 672 and st.at_infinity > 0
+    assert "every path accounted for" in hom.info["message"]
+    assert not hom.complete and "not verified complete" in hom.info["message"]
+    poses = []
+    for r in hom:
+        assert r.success and r.residual < 1e-9
+        for k in range(3):
+            Tk = upu_leg_frame(A[k], B[k], axis[k], arm[k], r.q[5 * k: 5 * k + 5])
+            assert np.max(np.abs(Tk - r.pose)) < 1e-9
+        poses.append(np.r_[r.pose[:3, 3], r.pose[:3, :3].ravel()])
+    poses = np.array(poses)
+    distinct = []
+    for p in poses:
+        if not any(np.max(np.abs(p - q)) < 1e-8 for q in distinct):
+            distinct.append(p)
+    counts = [sum(np.max(np.abs(p - q)) < 1e-8 for p in poses) for q in distinct]
+    assert counts == [8] * len(distinct)
+    ms = optkin.assembly_modes(m, rho, method="multistart", seed=0)
+    ref = [np.r_[r.pose[:3, 3], r.pose[:3, :3].ravel()] for r in ms]
+    assert len(ref) == len(distinct) >= 2
+    for q in ref:
+        assert min(np.max(np.abs(p - q)) for p in distinct) < 1e-8
+    trans = [p[:3] for p in distinct if np.max(np.abs(p[3:] - np.eye(3).ravel())) < 1e-9]
+    sph = three_spheres(A - B, rho)
+    assert len(trans) == 2
+    for s in sph:
+        assert min(np.max(np.abs(t - s)) for t in trans) < 1e-9

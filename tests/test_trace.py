@@ -15,7 +15,7 @@ import pytest
 import optkin
 from optkin.model import get_model
 from optkin.solvers import homotopy as H
-from optkin.solvers.shipped import CATALOGUE
+from optkin.solvers.shipped import CATALOGUE, UNVERIFIED
 from optkin.solvers.trace import trace_test
 
 
@@ -90,9 +90,11 @@ def test_shipped_start_systems_load_and_pass_the_trace_test(name, make, monkeypa
     model = get_model(make())
     path = H.shipped_path(model)
     assert path.is_file(), f"{name}: no shipped start system (python -m optkin.solvers.shipped)"
-    assert path.stat().st_size < 200_000
+    assert path.stat().st_size < 250_000  # the 3-UPU's 672 solutions: 205 kB
     S = H._read_start(model, path.read_bytes())
-    assert S is not None and S.verified, name
+    assert S is not None, name
+    # shipped unverified, and said so (every call then reports complete=False)
+    assert S.verified == (name not in UNVERIFIED), (name, S.stopped)
 
     # used as shipped: no monodromy in a process with an empty cache
     monkeypatch.setenv("OPTKIN_CACHE", str(tmp_path))
@@ -103,5 +105,7 @@ def test_shipped_start_systems_load_and_pass_the_trace_test(name, make, monkeypa
     monkeypatch.setattr(H, "start_system", refuse)
     loaded = H.load_or_build_start(model)
     assert np.array_equal(loaded.theta, S.theta)
+    if name in UNVERIFIED:
+        return
     T = trace_test(model, S, seed=2)
     assert T.passed, f"{name}: {T.message}"

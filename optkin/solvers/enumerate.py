@@ -638,15 +638,19 @@ _MULTISTART_ONLY = ("starts", "min_starts", "target", "target_upper", "bound", "
 
 def _homotopy_ready(model: Model, given: dict[str, Any]) -> bool:
     """``method="auto"`` takes the homotopy: the package ships this topology's start
-    system, for the geometry's pattern of structural entries or a wider family's (a
-    deterministic choice: never the state of a cache), and no option of the multistart
-    was given."""
+    system, verified complete, for the geometry's pattern of structural entries or a wider
+    family's (a deterministic choice: never the state of a cache), and no option of the
+    multistart was given."""
     if any(k in given for k in _MULTISTART_ONLY) or model.m != model.nx:
         return False
     from .homotopy import covering_start, shipped_start
 
-    try:  # the pattern's own, or a wider family's (homotopy_modes starts from it)
-        return shipped_start(model) is not None or covering_start(model) is not None
+    try:  # the pattern's own, or a wider family's (homotopy_modes starts from it); one
+        # shipped unverified (Tsai's 3-UPU) can never give a complete answer: not tried
+        S = shipped_start(model)
+        if S is None:
+            S = covering_start(model)
+        return S is not None and S.verified
     except MechanismError:
         return False
 

@@ -26,7 +26,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["CATALOGUE", "ship"]
+__all__ = ["CATALOGUE", "UNVERIFIED", "ship"]
 
 
 def _generic_rpr3():
@@ -86,7 +86,25 @@ CATALOGUE: list[tuple[str, Callable, bool]] = [
     ("akr3000", _lib("akr3000"), True),
     ("stewart_gough", _generic_stewart, True),
     ("hexa", _lib("hexa"), True),
+    # Tsai's 3-UPU at joint level, the library's default geometry (its base radius 1 makes
+    # one base coordinate structural): 672 solutions, 84 orbits of its legs' flips
+    # (homotopy.symmetry); not verified (see UNVERIFIED)
+    ("upu3", _lib("upu3"), True),
 ]
+
+#: Start systems shipped although the trace test has not verified them (it cannot yet in
+#: reasonable time), with why: :func:`ship` builds them with a long ``stale`` and stores
+#: them with ``stopped="stale"``, so that a call accounts for every path but never says
+#: ``complete`` (the message says the start system is not verified).
+UNVERIFIED: dict[str, str] = {
+    "upu3": "monodromy stops at 84 orbits of 8 by its 8th loop and finds nothing new in the "
+            "next 31 (seed 0); the trace test's witness set passed 11 000 points after 8 "
+            "loops and was still growing (the hyperplane on the pose alone: 3800). Tsai's "
+            "3-UPU with the base radius not 1 (no structural unit entry) has many more: 677 "
+            "orbits after 12 loops and still growing",
+}
+#: Loops in a row without a new solution before an unverified start system is stored.
+UNVERIFIED_STALE = 30
 
 
 def ship(names: list[str] | None = None, out=sys.stdout) -> None:
@@ -102,6 +120,18 @@ def ship(names: list[str] | None = None, out=sys.stdout) -> None:
             continue
         model = get_model(make())
         t0 = time.perf_counter()
+        if name in UNVERIFIED:
+            S = H.start_system(model, seed=0, stale=UNVERIFIED_STALE, max_loops=200,
+                               verify=False, deadline=Deadline(3600.0))
+            if S.stopped != "stale":
+                print(f"{name}: not shipped, monodromy stopped by {S.stopped}", file=out)
+                continue
+            path = H.shipped_path(model)
+            H.save_start(S, path)
+            path.chmod(0o644)
+            print(f"{name}: {S.root_count} solutions ({S.loops} loops, not verified), "
+                  f"{time.perf_counter() - t0:.1f} s -> {path.name}", file=out)
+            continue
         S = H.start_system(model, seed=0, deadline=Deadline(600.0))
         if S.stopped not in ("bound", "trace"):
             print(f"{name}: not shipped, monodromy stopped by {S.stopped}", file=out)
