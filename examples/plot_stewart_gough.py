@@ -38,15 +38,17 @@ print("leg lengths:", np.round(legs, 4))
 # %%
 # Its assembly modes
 # ------------------
-# The default ``method="auto"`` first tries the parameter homotopy from the start system
-# of the general 6-6 platform. This hexapod is special (planar base and platform, joints
-# in pairs), and several paths of the homotopy fail. ``auto`` then says so and runs the
-# multi-start search, which stops when its Good-Turing estimate of missing a mode is
-# small. Because base and platform are planar, every mode has a mirror image through the
-# base plane. The modes with the platform above the base are drawn.
+# The default ``method="auto"`` tracks the paths of the parameter homotopy from the
+# start system of the general 6-6 platform (40 paths). This hexapod is special (planar
+# base and platform, joints in pairs): 12 of its paths go to infinity, which the tracker
+# tells from failures by their growth near the end, so every path is accounted for and
+# the answer is complete (``modes.stats``). Where a path fails, ``auto`` says so and runs
+# the multi-start search instead. Because base and platform are planar, every mode has a
+# mirror image through the base plane. The modes with the platform above the base are
+# drawn.
 modes = optkin.assembly_modes(hexapod, legs)
-print("homotopy:", modes.info.get("homotopy"))
-print(modes.summary(), f"p_new = {modes.info['p_new']:.4f}")
+print(modes.info["message"])
+print(modes.summary(), modes.stats)
 
 
 def frame(ax, elev, azim):

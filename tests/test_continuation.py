@@ -612,3 +612,53 @@ def test_rpr3_limit_curves_in_closed_form(rpr, monkeypatch, phi):
             d = np.min(np.linalg.norm(T[:, None] - P[None], axis=2), axis=1)
             assert np.max(d) < seg, (np.max(d), seg)
             assert np.max(np.abs(np.linalg.norm(T - centre, axis=1) - rho)) < 1e-9
+
+
+@pytest.mark.parametrize("phi", [0.3, -2.0, 2.9])
+def test_rpr3_parallel_curves_in_closed_form(rpr, monkeypatch, phi):
+    """A 3-RPR's parallel singularity curve at a fixed orientation is a conic
+    (continuation.CLOSED_FORM_CONICS, sampled exactly): at every vertex the three leg
+    lines are concurrent or parallel (the determinant of their line coordinates (d, P x d),
+    written here, relative to the rows' sizes, below 1e-9); every sign change of det A
+    (rpr_det) between neighbours of a 300 x 300 grid of the box lies within a cell and a
+    chord of a vertex (the conic's part in the box covered); and the curves traced by
+    continuation (the flag off) lie on the closed form's chords."""
+    from optkin.analysis import continuation as cont
+
+    c, s = np.cos(phi), np.sin(phi)
+    R = np.array([[c, -s], [s, c]])
+
+    def curves(flag):
+        monkeypatch.setattr(cont, "CLOSED_FORM_CONICS", flag)
+        sc = optkin.singular_curves(rpr, plane="workspace", kind="parallel",
+                                    fixed={"phi": phi}, step=0.25)
+        assert sc.success, sc.message
+        return [cv for cv in sc.curves if cv.kind == "parallel"], sc.bounds
+
+    mine, (bx, by) = curves(True)
+    traced, _ = curves(False)
+    assert mine
+    P = np.vstack([cv.points for cv in mine])
+    assert np.all(P >= [bx[0] - 1e-9, by[0] - 1e-9]) and np.all(P <= [bx[1] + 1e-9, by[1] + 1e-9])
+    Pi = P[:, None, :] + PLAT3 @ R.T  # the legs' platform points
+    d = Pi - BASE3
+    lines = np.concatenate([d, (Pi[..., 0] * d[..., 1] - Pi[..., 1] * d[..., 0])[..., None]], 2)
+    rel = np.abs(np.linalg.det(lines)) / np.prod(np.linalg.norm(lines, axis=2), axis=1)
+    assert np.max(rel) < 1e-9, np.max(rel)
+    # coverage: the sign changes of det A on a grid, each near a vertex
+    n = 300
+    xs, ys = np.linspace(*bx, n), np.linspace(*by, n)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    D = np.sign(rpr_det(X, Y, phi))
+    mids = np.vstack([np.c_[(X[1:] + X[:-1]).ravel() / 2, Y[1:].ravel()][(D[1:] != D[:-1]).ravel()],
+                      np.c_[X[:, 1:].ravel(), (Y[:, 1:] + Y[:, :-1]).ravel() / 2][
+                          (D[:, 1:] != D[:, :-1]).ravel()]])
+    assert len(mids) > 50
+    seg = max(float(np.max(np.linalg.norm(np.diff(cv.points, axis=0), axis=1))) for cv in mine)
+    cell = max(xs[1] - xs[0], ys[1] - ys[0])
+    dist = np.min(np.linalg.norm(mids[:, None] - P[None], axis=2), axis=1)
+    assert np.max(dist) < seg + cell, (np.max(dist), seg, cell)
+    # the traced curves on the closed form's chords
+    T = np.vstack([cv.points for cv in traced])
+    dt = np.min(np.linalg.norm(T[:, None] - P[None], axis=2), axis=1)
+    assert np.max(dt) < seg, (np.max(dt), seg)

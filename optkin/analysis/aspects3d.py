@@ -21,16 +21,18 @@ integral the trapezoid rule less its curvature term (:func:`_integrate`); its bo
 box and a representative configuration come from its faces.
 
 Measured on the cuspidal 3-RPR of Zein, Wenger and Chablat with strokes [10, 30]
-(tests/test_aspects3d.py): 2 aspects of volumes 2097.05 and 2069.25 (length^2 rad) from
-36 even sections and 52 added, 3.2-4.4 s here (benchmarks/test_aspects3d.py); 144
-sections at step 0.08 give 2097.0 and 2068.7; voxel grids of the sign of det A find the
-same two components, 2097.7 and 2069.5 at 240^3 (3.6 s), 2096.6 and 2068.2 at 320^3
-(11 s), 2097.4 and 2068.7 at 400^3 (23 s). The strokes' limit curves of its sections
-come in closed form (the legs' circles), the parallel curves by continuation. The method
-is exact in x and y but not in phi, and no faster than the 240^3 grid yet (about 40 ms
-per section: the parallel curves' continuation, point by point in Python, the faces of
-the arrangement and their labels): the exact topology-changing orientations and a
-batched section are the next steps (see the issue tracker). An aspect whose whole
+(tests/test_aspects3d.py): 2 aspects of volumes 2097.03 and 2069.38 (length^2 rad) from
+36 even sections and 47 added (benchmarks/test_aspects3d.py: 1.3x faster than the 240^3
+grid in the same run); 198 sections at step 0.08 give 2096.93 and 2068.66; voxel grids of
+the sign of det A find the same two components, 2097.7 and 2069.5 at 240^3, 2096.6 and
+2068.2 at 320^3, 2097.4 and 2068.7 at 400^3, 2097.3 and 2068.7 at 480^3 (27 s). Both
+curves of its sections come in closed form: the strokes' limit curves are the legs'
+circles, the parallel curve a conic (:func:`optkin.analysis.continuation._conic_arcs`;
+3.0-3.3 s of CPU against 4.3-4.5 s traced, in one run). The method is exact in x and y
+but not in phi, and not yet the 5x of the issue tracker's target (about 30 ms a section:
+the faces of the arrangement, their interior points and labels, the links between
+sections): the exact topology-changing orientations and a batched section are the next
+steps. An aspect whose whole
 extent in phi is shorter than ``min_gap`` may be missed, and a neck thinner than it in
 phi may join or split aspects.
 

@@ -976,11 +976,20 @@ def _limit_arcs(chart: PlanarChart, tr: _Tracer, leg: int, lim: float,
         ends = np.r_[cuts, cuts[0] + 2 * np.pi]
         runs = [(a, b, False) for a, b in zip(ends[:-1], ends[1:])
                 if b - a > 1e-12 and inside(0.5 * (a + b))]
+    return _sampled_runs(tr, full, runs, free)
+
+
+def _sampled_runs(tr: _Tracer, full: Any, runs: list[tuple[float, float, bool]],
+                  free: np.ndarray, fine: int = 257
+                  ) -> list[tuple[np.ndarray, np.ndarray, tuple[str, str]]] | None:
+    """Curves given by a parametrisation ``full(s) -> (full points, all valid)`` over the
+    ``runs`` (s from a to b, closed or cut by the box), as ``_trace_all`` returns them:
+    each run sampled at ``fine`` values of s, then points every :data:`LIMIT_SPACING` step
+    of its arc in the scaled variables (and more where it turns by more than 0.25 rad
+    between points). None when a point is not valid (the caller traces the curve)."""
     out = []
     for a, b, closed in runs:
-        # the run sampled finely, then points every LIMIT_SPACING step of its arc in the
-        # scaled variables (and more where it turns by more than 0.25 rad between points)
-        tf = np.linspace(a, b, 257)
+        tf = np.linspace(a, b, fine)
         V, ok = full(tf)
         if not ok:  # a leg without its closed form somewhere: trace the curves instead
             return None
@@ -1001,6 +1010,171 @@ def _limit_arcs(chart: PlanarChart, tr: _Tracer, leg: int, lim: float,
             return None
         out.append((V[:, free] / tr.scl, closed,
                     ("closed", "closed") if closed else ("boundary", "boundary")))
+    return out
+
+
+#: The parallel curves of such sections from their closed form (:func:`_conic_arcs`).
+CLOSED_FORM_CONICS = True
+
+
+def _conic_arcs(chart: PlanarChart, tr: _Tracer, fixed: dict[int, float],
+                pidx: tuple[int, ...]
+                ) -> list[tuple[np.ndarray, bool, tuple[str, str]]] | None:
+    """The parallel singularity curve of a section at a fixed orientation in the
+    platform's (x, y), when every leg is a distance leg (a 3-RPR), in closed form: with
+    d_i = P_i - C_i (platform point less base point) the rows of the Jacobian of
+    |d_i|^2 / 2 in (x, y, phi) are (d_i, (P_i - p) x d_i), each linear in the platform's
+    position p, and the cubic terms of their determinant cancel (the first two columns of
+    its cubic part are p itself in every row): a conic in (x, y). Its six coefficients are
+    fitted to that determinant at 16 points of the box (refused, and the curve traced,
+    unless the fit is exact to 1e-9 of the determinant's size, the conic is not
+    degenerate, and the points then solve the tracer's system to 1e-9). Its real points
+    are P(s) = P0 - (grad Q(P0) . u) / (u' M u) u, u = (cos s, sin s), s in [0, pi): the
+    second point where the line through a point P0 of the conic in direction u meets it
+    (every conic, the hyperbola's branches split at its asymptotes' directions). Cut
+    exactly at the box's edges and sampled as :func:`_limit_arcs` samples the legs'
+    circles. Returned as ``_trace_all`` returns curves; [] when the conic has no point in
+    the box; None where this does not apply."""
+    sys = tr.sys
+    na = sys.na
+    if (not CLOSED_FORM_CONICS or not bool(np.all(chart.length_actuated))
+            or chart.n_combos != 1 or chart.n_legs != 3
+            or set(fixed) != {na + j for j in chart.orientation}
+            or [pidx[0] - na, pidx[1] - na] not in (list(chart.translation),
+                                                    list(chart.translation)[::-1])
+            or any(tr.box_periodic)):
+        return None
+    free = np.array(sys.free_idx)
+    X0 = np.zeros((1, sys.nx))
+    for i, v in fixed.items():
+        X0[0, i - na] = v
+    t = list(chart.translation)
+    k = [t.index(pidx[0] - na), t.index(pidx[1] - na)]  # plane order -> (x, y) order
+    bounds = np.asarray(tr.bounds, dtype=float)  # in the plane's order
+    C, _ = chart.centres_radii(np.zeros((1, na)))
+    C = C[0]
+    R = chart.platform_points(X0)[0]  # P_i - p (the platform at the origin)
+
+    def det(W: np.ndarray) -> np.ndarray:  # W (N, 2) in (x, y)
+        d = W[:, None, :] + R[None] - C[None]
+        third = R[None, :, 0] * d[..., 1] - R[None, :, 1] * d[..., 0]
+        return np.linalg.det(np.concatenate([d, third[..., None]], axis=2))
+
+    def to_xy(Wp: np.ndarray) -> np.ndarray:  # plane order -> (x, y)
+        W = np.empty_like(Wp)
+        W[:, k] = Wp
+        return W
+
+    g = np.linspace(0.0, 1.0, 4)
+    G1, G2 = np.meshgrid(bounds[0, 0] + g * (bounds[0, 1] - bounds[0, 0]),
+                         bounds[1, 0] + g * (bounds[1, 1] - bounds[1, 0]))
+    Wp = np.stack([G1.ravel(), G2.ravel()], 1)
+    c0 = Wp.mean(axis=0)
+    L = float(np.max(np.abs(Wp - c0))) or 1.0
+    Z = (Wp - c0) / L  # the plane's coordinates, centred and scaled
+    val = det(to_xy(Wp))
+    basis = np.stack([Z[:, 0] ** 2, Z[:, 0] * Z[:, 1], Z[:, 1] ** 2, Z[:, 0], Z[:, 1],
+                      np.ones(len(Z))], 1)
+    coef = np.linalg.lstsq(basis, val, rcond=None)[0]
+    size = float(np.max(np.abs(val))) or 1.0
+    if not np.all(np.isfinite(coef)) or np.max(np.abs(basis @ coef - val)) > 1e-9 * size:
+        return None
+    a, b, c, dd, e, f = coef / size
+    M = np.array([[a, b / 2], [b / 2, c]])
+    Q3 = np.array([[a, b / 2, dd / 2], [b / 2, c, e / 2], [dd / 2, e / 2, f]])
+    if abs(np.linalg.det(Q3)) < 1e-9 * max(1.0, float(np.max(np.abs(Q3)))) ** 3:
+        return None  # a pair of lines (or worse): traced
+
+    def Q(P: np.ndarray) -> np.ndarray:
+        x, y = P[..., 0], P[..., 1]
+        return a * x * x + b * x * y + c * y * y + dd * x + e * y + f
+
+    def grad(P: np.ndarray) -> np.ndarray:
+        return np.stack([2 * a * P[..., 0] + b * P[..., 1] + dd,
+                         b * P[..., 0] + 2 * c * P[..., 1] + e], -1)
+
+    # a real point P0 of the conic: on a principal axis through its centre, or (a
+    # parabola) along its axis through the box's centre; none: no real point
+    lam, vec = np.linalg.eigh(M)
+    P0 = None
+    if abs(np.linalg.det(M)) > 1e-12 * max(1.0, float(np.max(np.abs(M)))) ** 2:
+        cen = np.linalg.solve(M, -0.5 * np.array([dd, e]))
+        q0 = float(Q(cen))
+        for li, vi in zip(lam, vec.T):
+            if li != 0 and -q0 / li >= 0:
+                P0 = cen + np.sqrt(-q0 / li) * vi
+                break
+    else:
+        v0 = vec[:, int(np.argmin(np.abs(lam)))]
+        gv = float(grad(np.zeros(2)) @ v0)
+        if gv != 0:
+            P0 = -float(Q(np.zeros(2))) / gv * v0
+    if P0 is None:
+        return []
+
+    def point(s: np.ndarray) -> np.ndarray:
+        u = np.stack([np.cos(s), np.sin(s)], 1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tau = -(u @ grad(P0)) / np.einsum("ij,jk,ik->i", u, M, u)
+        return P0 + tau[:, None] * u
+
+    def angle(P: np.ndarray) -> float:  # the s of a point of the conic
+        w = P - P0
+        if np.linalg.norm(w) < 1e-12 * (1 + np.linalg.norm(P0)):
+            gr = grad(P0)  # P0 itself: the tangent's direction
+            w = np.array([-gr[1], gr[0]])
+        return float(np.mod(np.arctan2(w[1], w[0]), np.pi))
+
+    # breaks in s: the box's edges (in the scaled coordinates) and the asymptotes
+    zb = (bounds - c0[:, None]) / L
+    brk = []
+    for ax in (0, 1):
+        for edge in zb[ax]:
+            # Q on the line z[ax] = edge: a quadratic in the other coordinate
+            o = 1 - ax
+            if ax == 0:
+                A2, B2, C2 = c, b * edge + e, a * edge * edge + dd * edge + f
+            else:
+                A2, B2, C2 = a, b * edge + dd, c * edge * edge + e * edge + f
+            roots = np.roots([A2, B2, C2]) if abs(A2) > 1e-14 else (
+                np.array([-C2 / B2]) if abs(B2) > 1e-14 else np.zeros(0))
+            for r in roots:
+                if abs(r.imag) <= 1e-12 * (1 + abs(r.real)):
+                    P = np.zeros(2)
+                    P[ax], P[o] = edge, r.real
+                    brk.append(angle(P))
+    if abs(c) > 1e-14:
+        for r in np.roots([c, b, a]):
+            if abs(r.imag) <= 1e-12 * (1 + abs(r.real)):
+                brk.append(float(np.mod(np.arctan(r.real), np.pi)))
+    else:
+        brk.append(np.pi / 2)
+        if abs(b) > 1e-14:
+            brk.append(float(np.mod(np.arctan(-a / b), np.pi)))
+
+    def inside(P: np.ndarray) -> bool:
+        return bool(np.all(np.isfinite(P)) and np.all(P >= zb[:, 0] - 1e-12)
+                    and np.all(P <= zb[:, 1] + 1e-12))
+
+    brk = np.unique(np.array(brk))
+    if len(brk) == 0:  # an ellipse that no edge meets: inside the box, or not at all
+        runs = [(0.0, np.pi, True)] if inside(point(np.array([0.5]))[0]) else []
+    else:
+        ends = np.r_[brk, brk[0] + np.pi]
+        runs = [(lo, hi, False) for lo, hi in zip(ends[:-1], ends[1:])
+                if hi - lo > 1e-12 and inside(point(np.array([0.5 * (lo + hi)]))[0])]
+
+    def full(s: np.ndarray) -> tuple[np.ndarray, bool]:
+        X = np.repeat(X0, len(s), axis=0)
+        X[:, t] = to_xy(c0 + L * point(s))
+        V, ok = next(iter(chart.full_points(X)))
+        return V, bool(np.all(ok) and np.all(np.isfinite(V)))
+
+    out = _sampled_runs(tr, full, runs, free, fine=1025)
+    if out:  # the tracer's own system at the points: else trace the curve
+        for Zs, _, _ in out:
+            if np.max(np.abs(sys.G_many(Zs * tr.scl, tr.pfix, tr.lim))) > 1e-9:
+                return None
     return out
 
 
@@ -1478,7 +1652,9 @@ def _singular_curves(mech, plane, kind, fixed, bounds, grid, limits, step, tol, 
             break
         tr = _Tracer(sys, pvals, lim, pidx, bounds_arr, hmax, tol, max_steps, budget)
         traced = (_limit_arcs(chart, tr, int(cond.split(":")[1]), lim, fixed_map, pidx)
-                  if chart is not None and cond.startswith("limit:") else None)
+                  if chart is not None and cond.startswith("limit:") else
+                  _conic_arcs(chart, tr, fixed_map, pidx)
+                  if chart is not None and cond == "parallel" else None)
         if traced is None:
             if chart is not None:
                 seeds_v = _seeds_chart(sys, chart, cond, fixed_map, lim, n, bounds_full)

@@ -56,6 +56,9 @@ log = logging.getLogger("optkin.trace")
 #: unchanged (experimental: fewer witnesses on Tsai's 3-UPU, whose trace test with the
 #: invariant coordinates had 11 000 witnesses after 8 loops and growing).
 _POSE_SLICE = False
+#: The parameters the curve of the test moves: the offset c ("c") or, experimental, the
+#: actuated values ("qa").
+_DIRECTION = "c"
 
 #: The trace test passes when its residual (module docstring) is at most this.
 TRACE_TOL = 1e-6
@@ -217,7 +220,10 @@ def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int 
     # linear form a through them (a . y = 1)
     def along_c(d: np.ndarray) -> np.ndarray:
         out = np.zeros_like(d)
-        out[-n:] = d[-n:]
+        if _DIRECTION == "qa":  # experimental: the curve of the actuated values
+            out[:base.na] = d[:base.na]
+        else:
+            out[-n:] = d[-n:]
         return out
 
     th_q = th0 + along_c(_hom._random_theta(base, model, rng) - th0)
