@@ -623,7 +623,9 @@ def test_the_3upu_homotopy_accounts_for_every_path():
     A, B, axis, arm = 1.0 * u, 0.5 * u, np.c_[-u[:, 1], u[:, 0], np.zeros(3)], -u
     p0 = np.array([0.05, -0.02, 0.8])
     rho = np.linalg.norm(p0 + B - A, axis=1)
-    hom = optkin.assembly_modes(m, rho, method="homotopy")
+    # (a first call in a fresh cache tracks with the interpreted tracker while its code
+    # compiles: beside other tests, past assembly_modes' default 10 s)
+    hom = optkin.assembly_modes(m, rho, method="homotopy", time_limit=300)
     st = hom.stats
     assert hom.info["root_count"] == 672 and st.failed == 0, hom.info["message"]
     assert st.finite + st.at_infinity == 672 and st.at_infinity > 0

@@ -99,9 +99,11 @@ CATALOGUE: list[tuple[str, Callable, bool]] = [
 UNVERIFIED: dict[str, str] = {
     "upu3": "monodromy stops at 84 orbits of 8 by its 8th loop and finds nothing new in the "
             "next 31 (seed 0); the trace test's witness set passed 11 000 points after 8 "
-            "loops and was still growing (the hyperplane on the pose alone: 3800). Tsai's "
-            "3-UPU with the base radius not 1 (no structural unit entry) has many more: 677 "
-            "orbits after 12 loops and still growing",
+            "loops and was still growing (the hyperplane on the pose alone: 9 400 after 10); "
+            "with the test's curve along the leg lengths (trace._DIRECTION = 'qa') its 2 560 "
+            "witnesses were stable for 7 loops but the trace failed (residual 0.063): the "
+            "set may be incomplete. Tsai's 3-UPU with the base radius not 1 (no structural "
+            "unit entry) has many more: 677 orbits after 12 loops and still growing",
 }
 #: Loops in a row without a new solution before an unverified start system is stored.
 UNVERIFIED_STALE = 30
