@@ -22,8 +22,8 @@ box and a representative configuration come from its faces.
 
 Measured on the cuspidal 3-RPR of Zein, Wenger and Chablat with strokes [10, 30]
 (tests/test_aspects3d.py): 2 aspects of volumes 2097.03 and 2069.38 (length^2 rad) from
-36 even sections and 47 added (benchmarks/test_aspects3d.py: 1.3x faster than the 240^3
-grid in the same run); 198 sections at step 0.08 give 2096.93 and 2068.66; voxel grids of
+36 even sections and 47 added (benchmarks/test_aspects3d.py: 2.33 s against the 240^3
+grid's 2.73 s in the same run, 1.2x; 1.3x under load); 198 sections at step 0.08 give 2096.93 and 2068.66; voxel grids of
 the sign of det A find the same two components, 2097.7 and 2069.5 at 240^3, 2096.6 and
 2068.2 at 320^3, 2097.4 and 2068.7 at 400^3, 2097.3 and 2068.7 at 480^3 (27 s). Both
 curves of its sections come in closed form: the strokes' limit curves are the legs'
