@@ -911,6 +911,24 @@ CLOSED_FORM_LIMITS = True
 LIMIT_SPACING = 0.5
 
 
+def _distance_section(chart: PlanarChart, tr: _Tracer, fixed: dict[int, float],
+                      pidx: tuple[int, ...]) -> np.ndarray | None:
+    """The platform coordinates X0 (1, nx) of a section whose curves have closed forms:
+    every leg a distance leg with one posture, the orientation fixed and the plane the
+    platform's (x, y), not periodic; None otherwise."""
+    na = tr.sys.na
+    if (not bool(np.all(chart.length_actuated)) or chart.n_combos != 1
+            or set(fixed) != {na + j for j in chart.orientation}
+            or [pidx[0] - na, pidx[1] - na] not in (list(chart.translation),
+                                                    list(chart.translation)[::-1])
+            or any(tr.box_periodic)):
+        return None
+    X0 = np.zeros((1, tr.sys.nx))
+    for i, v in fixed.items():
+        X0[0, i - na] = v
+    return X0
+
+
 def _limit_arcs(chart: PlanarChart, tr: _Tracer, leg: int, lim: float,
                 fixed: dict[int, float], pidx: tuple[int, ...]
                 ) -> list[tuple[np.ndarray, bool, tuple[str, str]]] | None:
@@ -926,17 +944,10 @@ def _limit_arcs(chart: PlanarChart, tr: _Tracer, leg: int, lim: float,
     postures, another section or plane): the caller traces it."""
     sys = tr.sys
     na = sys.na
-    if (not CLOSED_FORM_LIMITS or not bool(np.all(chart.length_actuated))
-            or chart.n_combos != 1
-            or set(fixed) != {na + j for j in chart.orientation}
-            or [pidx[0] - na, pidx[1] - na] not in (list(chart.translation),
-                                                    list(chart.translation)[::-1])
-            or any(tr.box_periodic)):
+    X0 = _distance_section(chart, tr, fixed, pidx) if CLOSED_FORM_LIMITS else None
+    if X0 is None:
         return None
     free = np.array(sys.free_idx)
-    X0 = np.zeros((1, sys.nx))
-    for i, v in fixed.items():
-        X0[0, i - na] = v
     qa = np.zeros((1, na))
     qa[0, leg] = lim
     C, r = chart.centres_radii(qa)
@@ -1037,17 +1048,11 @@ def _conic_arcs(chart: PlanarChart, tr: _Tracer, fixed: dict[int, float],
     the box; None where this does not apply."""
     sys = tr.sys
     na = sys.na
-    if (not CLOSED_FORM_CONICS or not bool(np.all(chart.length_actuated))
-            or chart.n_combos != 1 or chart.n_legs != 3
-            or set(fixed) != {na + j for j in chart.orientation}
-            or [pidx[0] - na, pidx[1] - na] not in (list(chart.translation),
-                                                    list(chart.translation)[::-1])
-            or any(tr.box_periodic)):
+    X0 = (_distance_section(chart, tr, fixed, pidx)
+          if CLOSED_FORM_CONICS and chart.n_legs == 3 else None)
+    if X0 is None:
         return None
     free = np.array(sys.free_idx)
-    X0 = np.zeros((1, sys.nx))
-    for i, v in fixed.items():
-        X0[0, i - na] = v
     t = list(chart.translation)
     k = [t.index(pidx[0] - na), t.index(pidx[1] - na)]  # plane order -> (x, y) order
     bounds = np.asarray(tr.bounds, dtype=float)  # in the plane's order

@@ -419,7 +419,7 @@ class _Tracker:
         # the periodic angles: the system is polynomial in their cos and sin, which pass
         # ``big`` where |Im| > log(big) (Tsai's 3-UPU: paths to infinity at |Im| ~ 1e3,
         # where cos overflowed long before |x| reached big)
-        per = np.flatnonzero(np.asarray(getattr(sys, "periodic", np.zeros(n, bool)), bool))
+        per = np.flatnonzero(_periodic(sys))
 
         def build() -> ca.Function:
             # the value and Jacobian (the corrector), the Jacobian and the parameter derivative
@@ -931,7 +931,7 @@ def track(sys: _System, X0: np.ndarray, th0: np.ndarray, th1: np.ndarray,
         _diverging(sys, X, status, t, th0, th1, gamma, sc)
         return _Paths(X, status, cond, t, steps)
     d = th1 - th0
-    per = np.flatnonzero(np.asarray(getattr(sys, "periodic", np.zeros(n, bool)), bool))
+    per = np.flatnonzero(_periodic(sys))
 
     def theta(t):
         s = gamma * t / (1 + (gamma - 1) * t)
@@ -1013,6 +1013,11 @@ FAR = 1e2
 VALUATION = 0.1
 
 
+def _periodic(sys) -> np.ndarray:
+    """Which unknowns of a system the tracker sees as periodic angles (bool, (n,))."""
+    return np.asarray(getattr(sys, "periodic", np.zeros(sys.n, bool)), bool)
+
+
 def _diverging(sys, X, status, t, th0, th1, gamma, sc) -> None:
     """Paths that stopped short of the target in the endgame zone on their way to
     infinity, marked ``"at_infinity"`` in ``status`` (in place). Such a path's largest
@@ -1026,7 +1031,7 @@ def _diverging(sys, X, status, t, th0, th1, gamma, sc) -> None:
     idx = np.flatnonzero((status == "failed") & (t >= ENDGAME) & (t < 1.0))
     if not idx.size:
         return
-    per = np.asarray(getattr(sys, "periodic", np.zeros(sys.n, bool)), bool)
+    per = _periodic(sys)
     x, tt = X[idx], t[idx]
     d = th1 - th0
     s = gamma * tt / (1 + (gamma - 1) * tt)
@@ -1130,6 +1135,11 @@ class Symmetry:
     sign: np.ndarray  # (G, n)
     shift: np.ndarray  # (G, n)
 
+    @classmethod
+    def identity(cls, n: int) -> Symmetry:
+        """The trivial group of ``n`` unknowns."""
+        return cls(np.ones((1, n)), np.zeros((1, n)))
+
     @property
     def order(self) -> int:
         return int(self.sign.shape[0])
@@ -1157,7 +1167,7 @@ def _find_symmetry(model) -> Symmetry:
 
     sys = _system(model)
     n = sys.n
-    ident = Symmetry(np.ones((1, n)), np.zeros((1, n)))
+    ident = Symmetry.identity(n)
     if not np.any(sys.periodic):
         return ident
     rng = np.random.default_rng(5)
@@ -1270,9 +1280,8 @@ class StartSystem:
             sym = symmetry(model)
             idx = _orbits(model, self.solutions, sym)
             if idx is None:
-                n = self.solutions.shape[1]
-                sym, idx = Symmetry(np.ones((1, n)), np.zeros((1, n))), np.arange(
-                    self.root_count)
+                sym = Symmetry.identity(self.solutions.shape[1])
+                idx = np.arange(self.root_count)
             got = self.__dict__["_reps"] = (sym, idx)
         return got
 
@@ -1399,7 +1408,7 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
     R = _canonical(model, x0[None, :])
     S = _distinct(model, np.zeros((0, sys.n)), _canonical(model, sym.apply(R)))
     if len(S) != sym.order:  # x0 a fixed point of some map (probability zero)
-        sym = Symmetry(np.ones((1, sys.n)), np.zeros((1, sys.n)))
+        sym = Symmetry.identity(sys.n)
         S = R
     loops = 0
     out_of_time = False

@@ -210,7 +210,7 @@ def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int 
     xr = np.random.default_rng(3).normal(size=(1, n)) + 0j
     inv = np.all(np.abs(tsys.coords(sym.apply(xr)) - tsys.coords(xr)) <= 1e-12, axis=0)
     if _POSE_SLICE and sym.order > 1:
-        inv &= np.concatenate([[not p] if not p else [False, False] for p in tsys.per])
+        inv &= np.concatenate([[False, False] if p else [True] for p in tsys.per])
     th0 = np.asarray(start.theta, dtype=complex)
     size = float(np.max(base.scale))
     ysc = max(1.0, size)
