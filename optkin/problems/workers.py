@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import gc
 import os
 import pickle
 import queue
@@ -138,6 +139,10 @@ def serve(rfd: int, wfd: int, parent: int) -> None:
     from optkin.problems import runner
 
     _preload()
+    # the modules loaded: into the permanent generation, which the collector no longer
+    # traverses, and collection back on (the boot turned it off, :data:`_BOOT`)
+    gc.freeze()
+    gc.enable()
     _send(wfd, ("ready", {"pid": os.getpid(),
                           "optkin": str(Path(optkin.__file__).resolve().parent),
                           "version": getattr(optkin, "__version__", "")}))
@@ -160,7 +165,11 @@ def serve(rfd: int, wfd: int, parent: int) -> None:
 
 
 _BOOT = (
-    "import sys\n"
+    # no cyclic garbage collection while the worker imports (each import allocates objects
+    # that live as long as the process; the collections paid for nothing, about 5 % of
+    # the start: 218 against 230 ms here); :func:`serve` turns it back on
+    "import gc, sys\n"
+    "gc.disable()\n"
     "root, rfd, wfd, parent = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])\n"
     # the parent's optkin first, then the parent's path; never the working directory
     # ('' for python -c)
