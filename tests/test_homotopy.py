@@ -655,3 +655,24 @@ def test_the_3upu_homotopy_accounts_for_every_path():
     assert len(trans) == 2
     for s in sph:
         assert min(np.max(np.abs(t - s)) for t in trans) < 1e-9
+
+
+def test_solutions_far_out_are_told_apart_relative_to_their_size():
+    """Monodromy's identification of solutions (homotopy._distinct): a point far out
+    computed twice agrees only relatively (Tsai's 3-UPU, seed 2: an orbit at |x| ~ 490
+    whose endpoints differed by 1.5e-6 from loop to loop, 3e-9 relative, was added again
+    and again: 1 256 "solutions" of which 672 distinct). Two copies of such a point within
+    3e-9 relative are one solution; points 1e-4 apart relative stay two, near and far."""
+    model = get_model(optkin.mechanisms.rpr3([[0, 0], [10, 0], [4, 8]],
+                                             [[-1, -0.5], [1, -0.5], [0, 1]]))
+    sc = np.asarray(model.x_scale, dtype=float)
+    rng = np.random.default_rng(5)
+    for size in (1.0, 490.0):
+        y = size * sc * (rng.normal(size=3) + 1j * rng.normal(size=3))
+        y[2] = 0.3 + 1j * y[2].imag / sc[2]  # the angle: its real part canonical
+        twin = y + 3e-9 * np.max(np.abs(y)) * np.exp(1j * rng.uniform(0, 6.3, 3))
+        far = y + 1e-4 * (1 + np.max(np.abs(y) / sc)) * sc * np.array([2.0, 0, 0])
+        S = y[None]
+        assert H._distinct(model, S, twin[None]).shape[0] == 0, size
+        assert H._distinct(model, S, far[None]).shape[0] == 1, size
+        assert H._distinct(model, np.zeros((0, 3)), np.vstack([y, twin, far])).shape[0] == 2
