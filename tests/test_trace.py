@@ -109,3 +109,33 @@ def test_shipped_start_systems_load_and_pass_the_trace_test(name, make, monkeypa
         return
     T = trace_test(model, S, seed=2)
     assert T.passed, f"{name}: {T.message}"
+
+
+def test_new_witnesses_are_those_a_pairwise_comparison_finds():
+    """The witnesses' identification (trace._new_rows: windows on a random projection)
+    against the plain comparison of every row with every earlier one, written here, on
+    random sets with copies planted 3e-9 (the same point) and 2e-6 (another) relative
+    apart, near and far out."""
+    from optkin.solvers.trace import _new_rows
+
+    def pairwise(S, Y, sc, tol=1e-6):
+        out = []
+        for y in Y:
+            P = np.vstack([S] + out) if len(S) or out else np.zeros((0, Y.shape[1]))
+            size = 1.0 + np.max(np.abs(y) / sc)
+            if not len(P) or np.min(np.max(np.abs(P - y) / sc, axis=1)) > tol * size:
+                out.append(y[None])
+        return np.vstack(out) if out else np.zeros((0, Y.shape[1]), complex)
+
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        m = int(rng.integers(2, 21))
+        sc = rng.uniform(0.5, 3.0, m)
+        base = ((rng.normal(size=(int(rng.integers(1, 60)), m)) + 1j * rng.normal(size=(1, m)))
+                * np.exp(rng.uniform(0, 6)))
+        S = base[:int(rng.integers(0, len(base)))]
+        Y = base[rng.integers(0, len(base), int(rng.integers(1, 80)))]
+        Y = Y * (1 + rng.choice([0.0, 3e-9, 2e-6], size=(len(Y), 1)))
+        Y = np.vstack([Y, rng.normal(size=(5, m)) + 0j])[rng.permutation(len(Y) + 5)]
+        got, ref = _new_rows(S, Y, sc), pairwise(S, Y, sc)
+        assert got.shape == ref.shape and np.array_equal(got, ref)
