@@ -171,7 +171,12 @@ def _canon_w(tsys: _TraceSystem, Y: np.ndarray) -> np.ndarray:
 
 
 def _new_rows(S: np.ndarray, Y: np.ndarray, sc: np.ndarray, tol: float = 1e-6) -> np.ndarray:
-    """Rows of Y not within tol of a row of S or an earlier row of Y, in scaled units and
+    """Rows of Y not within tol of a row of S or an earlier row of Y (:func:`_new_mask`)."""
+    return Y[_new_mask(S, Y, sc, tol)]
+
+
+def _new_mask(S: np.ndarray, Y: np.ndarray, sc: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """Which rows of Y are not within tol of a row of S or an earlier row of Y, in scaled units and
     relative to the row's size (1 + its largest scaled entry: witnesses far out are
     accurate only relatively).
 
@@ -182,7 +187,7 @@ def _new_rows(S: np.ndarray, Y: np.ndarray, sc: np.ndarray, tol: float = 1e-6) -
     comparison), more as N grew."""
     m = Y.shape[1]
     if not len(Y):
-        return Y.reshape(0, m)
+        return np.zeros(0, dtype=bool)
     rng = np.random.default_rng(1234)
     wr, wi = rng.normal(size=m), rng.normal(size=m)
     lip = float(np.sum(np.abs(wr)) + np.sum(np.abs(wi)))  # |key(y) - key(p)| <= lip d
@@ -211,7 +216,7 @@ def _new_rows(S: np.ndarray, Y: np.ndarray, sc: np.ndarray, tol: float = 1e-6) -
         near = near[(near < i) & keep[near]]
         if len(near) and np.min(np.max(np.abs(Zy[near] - Zy[i]), axis=1)) <= rad[i]:
             keep[i] = False
-    return Y[keep]
+    return keep
 
 
 def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int = 200,
@@ -286,14 +291,19 @@ def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int 
     Wr = np.zeros((0, n + 1), complex)  # one of each orbit (tracked)
 
     def add_witnesses(Y: np.ndarray) -> int:
+        """The new points of Y with their orbits (one by one: a point whose orbit an
+        earlier one brought adds nothing); how many orbits were new."""
         nonlocal W, Wr
-        grew = 0
-        for y in _new_rows(W, _canon_w(tsys, Y), tsys.scale):
-            orbit = _new_rows(W, _canon_w(tsys, tsym.apply(y[None])), tsys.scale)
-            if len(orbit):
-                W, Wr = np.vstack([W, orbit]), np.vstack([Wr, y[None]])
-                grew += 1
-        return grew
+        Y = _new_rows(W, _canon_w(tsys, Y), tsys.scale)
+        if not len(Y):
+            return 0
+        G = tsym.order
+        O = _canon_w(tsys, tsym.apply(Y)).reshape(G, len(Y), -1).transpose(1, 0, 2)
+        O = O.reshape(G * len(Y), -1)  # each point's orbit in turn
+        keep = _new_mask(W, O, tsys.scale)
+        new = keep.reshape(len(Y), G).any(axis=1)
+        W, Wr = np.vstack([W, O[keep]]), np.vstack([Wr, Y[new]])
+        return int(new.sum())
 
     add_witnesses(np.hstack([Xq, np.ones((len(Xq), 1))]))
 
