@@ -139,3 +139,26 @@ def test_new_witnesses_are_those_a_pairwise_comparison_finds():
         Y = np.vstack([Y, rng.normal(size=(5, m)) + 0j])[rng.permutation(len(Y) + 5)]
         got, ref = _new_rows(S, Y, sc), pairwise(S, Y, sc)
         assert got.shape == ref.shape and np.array_equal(got, ref)
+
+
+def test_paths_that_end_on_one_point_give_no_trace(monkeypatch):
+    """A trace from endpoints two of which coincide (path jumping, every path 'finite')
+    is not computed: the paths are tracked again, and with every try jumping the test
+    does not pass. The 3-RPR's complete set, its tracked endpoints' last row made a copy
+    of the first."""
+    model = get_model(_rpr3())
+    S = H.start_system(model, seed=5)
+    real = H.track_orbits
+    calls = []
+
+    def jumping(*a, **k):
+        P = real(*a, **k)
+        X = P.x.copy()
+        X[-1] = X[0]
+        calls.append(1)
+        return H._Paths(X, P.status, P.cond, P.t, P.steps)
+
+    monkeypatch.setattr(H, "track_orbits", jumping)
+    T = trace_test(model, S, seed=1, max_loops=6)
+    assert not T.passed and not np.isfinite(T.residual), T
+    assert len(calls) >= H.TRIES

@@ -351,13 +351,20 @@ def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int 
         for tt in (0.5 * g, g):
             TH1 = TH0.copy()
             TH1[0] = tt
+            ok = False
             for _ in range(_hom.TRIES):
                 Q = _hom.track_orbits(tsys, tsym, Y0r, TH0, TH1,
                                       np.exp(2j * np.pi * rng.uniform()), tracker=tr,
                                       deadline=deadline)
-                if np.all(Q.status == "finite"):
+                # every path finite, and no two ending at one point (path jumping: the
+                # 3-UPU's 24 648 paths once ended on 24 636 points, all "finite")
+                ok = bool(np.all(Q.status == "finite")) and bool(
+                    _new_mask(np.zeros((0, n + 1), complex), _canon_w(tsys, Q.x),
+                              tsys.scale).all())
+                if ok:
                     break
-            if not np.all(Q.status == "finite"):
+            if not ok:
+                log.debug("trace test: the paths to t = %s failed or jumped", tt)
                 break
             ends.append(Q.x)
         if len(ends) == 2:
