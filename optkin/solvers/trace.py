@@ -209,7 +209,7 @@ def _new_mask(S: np.ndarray, Y: np.ndarray, sc: np.ndarray, tol: float = 1e-6) -
     idx = np.flatnonzero(keep)
     order = idx[np.argsort(ky[idx], kind="stable")]
     ks = ky[order]
-    for pos, i in enumerate(order):
+    for i in order:
         lo = np.searchsorted(ks, ky[i] - lip * rad[i], side="left")
         hi = np.searchsorted(ks, ky[i] + lip * rad[i], side="right")
         near = order[lo:hi]
