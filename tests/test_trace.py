@@ -115,7 +115,7 @@ def test_new_witnesses_are_those_a_pairwise_comparison_finds():
     """The witnesses' identification (trace._new_rows: windows on a random projection)
     against the plain comparison of every row with every earlier one, written here, on
     random sets with copies planted 3e-9 (the same point) and 2e-6 (another) relative
-    apart, near and far out."""
+    apart, near and far out, and on chains of rows 0.8 tolerances apart."""
     from optkin.solvers.trace import _new_rows
 
     def pairwise(S, Y, sc, tol=1e-6):
@@ -138,6 +138,17 @@ def test_new_witnesses_are_those_a_pairwise_comparison_finds():
         Y = Y * (1 + rng.choice([0.0, 3e-9, 2e-6], size=(len(Y), 1)))
         Y = np.vstack([Y, rng.normal(size=(5, m)) + 0j])[rng.permutation(len(Y) + 5)]
         got, ref = _new_rows(S, Y, sc), pairwise(S, Y, sc)
+        assert got.shape == ref.shape and np.array_equal(got, ref)
+    # chains: rows 0.8 tolerances apart along a line, in random order (a row near one
+    # that is itself dropped must be compared with the rows kept)
+    for _ in range(100):
+        y0 = rng.normal(size=3) + 0j
+        d = rng.normal(size=3)
+        d /= np.max(np.abs(d))
+        step = 0.8e-6 * (1 + np.max(np.abs(y0)))
+        Y = np.array([y0 + k * step * d for k in range(6)])[rng.permutation(6)]
+        got, ref = _new_rows(np.zeros((0, 3), complex), Y, np.ones(3)), pairwise(
+            np.zeros((0, 3), complex), Y, np.ones(3))
         assert got.shape == ref.shape and np.array_equal(got, ref)
 
 

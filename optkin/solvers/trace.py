@@ -205,11 +205,12 @@ def _new_mask(S: np.ndarray, Y: np.ndarray, sc: np.ndarray, tol: float = 1e-6) -
         for i in np.flatnonzero(hi > lo):
             if np.min(np.max(np.abs(Zs[lo[i]:hi[i]] - Zy[i]), axis=1)) <= rad[i]:
                 keep[i] = False
-    # among the rows of Y: each against the earlier ones kept, by the same windows
+    # among the rows of Y, in their order: each against the earlier ones kept (already
+    # decided), found by the same windows in the rows sorted by projection
     idx = np.flatnonzero(keep)
     order = idx[np.argsort(ky[idx], kind="stable")]
     ks = ky[order]
-    for i in order:
+    for i in idx:
         lo = np.searchsorted(ks, ky[i] - lip * rad[i], side="left")
         hi = np.searchsorted(ks, ky[i] + lip * rad[i], side="right")
         near = order[lo:hi]
