@@ -46,6 +46,7 @@ import numpy as np
 
 from ..model import enumeration as _enum
 from . import homotopy as _hom
+from .homotopy import _new_mask
 
 __all__ = ["TraceResult", "trace_test"]
 
@@ -171,53 +172,9 @@ def _canon_w(tsys: _TraceSystem, Y: np.ndarray) -> np.ndarray:
 
 
 def _new_rows(S: np.ndarray, Y: np.ndarray, sc: np.ndarray, tol: float = 1e-6) -> np.ndarray:
-    """Rows of Y not within tol of a row of S or an earlier row of Y (:func:`_new_mask`)."""
+    """Rows of Y not within tol of a row of S or an earlier row of Y
+    (:func:`optkin.solvers.homotopy._new_mask`)."""
     return Y[_new_mask(S, Y, sc, tol)]
-
-
-def _new_mask(S: np.ndarray, Y: np.ndarray, sc: np.ndarray, tol: float = 1e-6) -> np.ndarray:
-    """Which rows of Y are not within tol of a row of S or an earlier row of Y, in scaled units and
-    relative to the row's size (1 + its largest scaled entry: witnesses far out are
-    accurate only relatively).
-
-    Each row is compared only with the rows whose projection on a fixed random direction
-    lies within the bound the tolerance puts on it (rows sorted by that projection), not
-    with all of them: with ``N`` witnesses found and as many candidates, a loop of the
-    3-UPU's witness monodromy spent a fifth of its time here at N = 11 000 (an N x N
-    comparison), more as N grew."""
-    m = Y.shape[1]
-    if not len(Y):
-        return np.zeros(0, dtype=bool)
-    rng = np.random.default_rng(1234)
-    wr, wi = rng.normal(size=m), rng.normal(size=m)
-    lip = float(np.sum(np.abs(wr)) + np.sum(np.abs(wi)))  # |key(y) - key(p)| <= lip d
-    Zy = Y / sc
-    ky = Zy.real @ wr + Zy.imag @ wi
-    rad = tol * (1.0 + np.max(np.abs(Zy), axis=1))
-    keep = np.ones(len(Y), dtype=bool)
-    if len(S):
-        Zs = np.asarray(S) / sc
-        ks = Zs.real @ wr + Zs.imag @ wi
-        order = np.argsort(ks)
-        ks, Zs = ks[order], Zs[order]
-        lo = np.searchsorted(ks, ky - lip * rad, side="left")
-        hi = np.searchsorted(ks, ky + lip * rad, side="right")
-        for i in np.flatnonzero(hi > lo):
-            if np.min(np.max(np.abs(Zs[lo[i]:hi[i]] - Zy[i]), axis=1)) <= rad[i]:
-                keep[i] = False
-    # among the rows of Y, in their order: each against the earlier ones kept (already
-    # decided), found by the same windows in the rows sorted by projection
-    idx = np.flatnonzero(keep)
-    order = idx[np.argsort(ky[idx], kind="stable")]
-    ks = ky[order]
-    for i in idx:
-        lo = np.searchsorted(ks, ky[i] - lip * rad[i], side="left")
-        hi = np.searchsorted(ks, ky[i] + lip * rad[i], side="right")
-        near = order[lo:hi]
-        near = near[(near < i) & keep[near]]
-        if len(near) and np.min(np.max(np.abs(Zy[near] - Zy[i]), axis=1)) <= rad[i]:
-            keep[i] = False
-    return keep
 
 
 def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int = 200,
