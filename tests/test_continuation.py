@@ -662,3 +662,44 @@ def test_rpr3_parallel_curves_in_closed_form(rpr, monkeypatch, phi):
     T = np.vstack([cv.points for cv in traced])
     dt = np.min(np.linalg.norm(T[:, None] - P[None], axis=2), axis=1)
     assert np.max(dt) < seg, (np.max(dt), seg)
+
+
+@pytest.mark.parametrize("k", [4, 11, 40])
+def test_compiled_code_landing_mid_trace_changes_nothing(monkeypatch, k):
+    """The tracer's corrector and G/J are interpreted until their compiled library lands,
+    at whatever moment a background build finishes. Here each one is swapped, at its k-th
+    look, for a copy of itself (the same numbers, a new Function, as when the compiled code
+    lands): the curves and aspects must be those of a run without the swap, bit for bit.
+    Before the fix, a swap between the corrector's call and its success check read the
+    status of a buffer never called, failed a good step, and moved a five-bar's aspect
+    areas in the fifth digit (seen as runs of one batch disagreeing)."""
+    import casadi as ca
+
+    from optkin.model import compiled as cc
+
+    monkeypatch.setenv("OPTKIN_COMPILE", "off")  # the interpreted code throughout
+    mech = optkin.mechanisms.five_bar(6.421981, 7.887324, 5.854309, 5.854309, 7.887324)
+
+    def run():
+        a = optkin.aspects(mech)
+        assert a.success
+        return ([x.area for x in a.aspects],
+                [c.points.copy() for c in a.curves.curves])
+
+    ref_areas, ref_pts = run()
+    seen: dict[int, int] = {}
+    swaps = []
+
+    def poll(self):
+        n = seen[id(self)] = seen.get(id(self), 0) + 1
+        if n == k:
+            self.f = ca.Function.deserialize(self.f.serialize())
+            self._maps = {}
+            swaps.append(self.tag)
+
+    monkeypatch.setattr(cc.LateCompiled, "poll", poll)
+    areas, pts = run()
+    assert swaps  # the swap happened during the trace
+    assert areas == ref_areas
+    assert len(pts) == len(ref_pts)
+    assert all(np.array_equal(p, q) for p, q in zip(pts, ref_pts))

@@ -281,8 +281,9 @@ class _System:
         """The corrector's first steps (:meth:`_Functions.corrector`): (u, done, failed,
         k, J, tangent), copies (thread-safe)."""
         with self._lock:
-            r = self._corr(up, a, t, rest, scl, tol, cap)
-            ok = self._corr.ok()
+            fn = self._corr  # once: a second look may meet the compiled code just landed
+            r = fn(up, a, t, rest, scl, tol, cap)
+            ok = fn.ok()
             u, done, failed, k = r[0].copy(), bool(r[1][0]), bool(r[2][0]), int(r[3][0])
             # J (m, nz), dense: stored by columns
             J = r[4].reshape(self.nz, self.n_rows).T.copy() if done else None
