@@ -15,7 +15,7 @@ import pytest
 import optkin
 from optkin.model import get_model
 from optkin.solvers import homotopy as H
-from optkin.solvers.shipped import CATALOGUE, UNVERIFIED
+from optkin.solvers.shipped import CATALOGUE, TRACE_OPTIONS, UNVERIFIED
 from optkin.solvers.trace import trace_test
 
 
@@ -52,6 +52,35 @@ def test_trace_passes_on_the_3rps_whose_solutions_satisfy_affine_relations():
     assert np.linalg.matrix_rank(np.c_[Y, np.ones(16)], tol=1e-9 * np.abs(Y).max()) == 11
     ok = trace_test(model, S, seed=1)
     assert ok.passed and ok.residual < 1e-9, ok.message
+
+
+def test_pose_slice_along_the_leg_lengths_sums_only_what_it_slices():
+    """The 3-RPS's 16 solutions (complete: the default test passes on them, above), the
+    curve moved along the leg lengths and sliced by the platform's pose. A revolute angle
+    of a leg has cos = (leg vector . axis) / leg length, which blows up where the length
+    moving along the curve passes 0 while the pose, and so the slice's function, stays
+    finite: summed with the rest, the complete set failed (residual 0.087); the traces
+    sum the pose and lam only, and pass. One solution dropped still fails."""
+    model = get_model(optkin.mechanisms.rps3())
+    S = H.shipped_start(model)
+    assert S.root_count == 16
+    ok = trace_test(model, S, seed=2, direction="qa", slice="pose")
+    assert ok.passed and ok.residual < 1e-9, ok.message
+    short = dataclasses.replace(S, solutions=S.solutions[1:])
+    bad = trace_test(model, short, seed=2, max_loops=20, direction="qa", slice="pose")
+    assert not bad.passed and bad.residual > 1e-4, bad.message
+
+
+def test_trace_options_are_checked():
+    model = get_model(_rpr3())
+    S = H.start_system(model, seed=5)
+    with pytest.raises(ValueError, match="direction must be one of"):
+        trace_test(model, S, direction="x")
+    with pytest.raises(ValueError, match="slice must be one of"):
+        trace_test(model, S, slice="all")
+    fb = get_model(optkin.mechanisms.five_bar(1.3, 0.8, 1.1, 0.9, 0.7))
+    with pytest.raises(ValueError, match=r"prismatic actuators.*revolute: use direction='c'"):
+        trace_test(fb, H.shipped_start(fb), direction="qa")
 
 
 @pytest.mark.slow
@@ -107,7 +136,7 @@ def test_shipped_start_systems_load_and_pass_the_trace_test(name, make, monkeypa
     assert np.array_equal(loaded.theta, S.theta)
     if name in UNVERIFIED:
         return
-    T = trace_test(model, S, seed=2)
+    T = trace_test(model, S, seed=2, **TRACE_OPTIONS.get(name, {}))
     assert T.passed, f"{name}: {T.message}"
 
 

@@ -1422,7 +1422,8 @@ def _random_theta(sys: _System, model, rng, c: np.ndarray | None = None) -> np.n
 
 
 def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
-                 deadline: Any = None, verify: bool = True) -> StartSystem:
+                 deadline: Any = None, verify: bool = True,
+                 trace_options: dict[str, Any] | None = None) -> StartSystem:
     """Monodromy: one solution by construction, grown by random loops (module docstring).
 
     Where the structure has a known bound on the number of solutions (distance legs:
@@ -1430,7 +1431,8 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
     after ``stale`` loops in a row without a new solution and, with ``verify``, the
     trace test (:func:`optkin.solvers.trace.trace_test`) decides: passed, the set is
     complete (``stopped="trace"``); failed, another round follows, up to ``max_loops``
-    loops in all. ``deadline`` (an :class:`optkin.limits.Deadline`) stops it too."""
+    loops in all. ``deadline`` (an :class:`optkin.limits.Deadline`) stops it too.
+    ``trace_options``: keywords of the trace test (its ``direction`` and ``slice``)."""
     bound = _enum.known_bound(model)
     t0 = time.perf_counter()
     sys = _system(model)
@@ -1489,7 +1491,7 @@ def start_system(model, seed: int = 0, stale: int = 8, max_loops: int = 60,
         from .trace import trace_test
 
         trace = trace_test(model, StartSystem(th, S, loops, 0.0), seed=seed,
-                           deadline=deadline)
+                           deadline=deadline, **(trace_options or {}))
         if trace.passed:
             break
     stopped = ("time" if out_of_time or (deadline is not None and deadline.expired()) else

@@ -52,17 +52,9 @@ __all__ = ["TraceResult", "trace_test"]
 
 log = logging.getLogger("optkin.trace")
 
-#: With a symmetry group, the hyperplane reads only the unknowns that are not periodic
-#: angles (a spatial platform's pose) rather than every coordinate the group leaves
-#: unchanged (experimental: fewer witnesses on Tsai's 3-UPU, whose trace test with the
-#: invariant coordinates had 11 000 witnesses after 8 loops and growing).
-_POSE_SLICE = False
-#: The parameters the test's curve moves: the offset c ("c"), or (experimental, for
-#: actuated values the system is polynomial in) the actuated values ("qa"). On Tsai's
-#: 3-UPU with the pose hyperplane, "qa" saturated at 2 560 witnesses by the 11th loop
-#: (stable for 7 more) but the trace failed on the shipped 672 (residual 0.063): the start
-#: system, or the witness set, is incomplete, or the restricted slice is not generic.
-_DIRECTION = "c"
+#: The ways :func:`trace_test` may slice and move its curve (module docstring).
+SLICES = ("invariant", "pose")
+DIRECTIONS = ("c", "qa")
 
 #: The trace test passes when its residual (module docstring) is at most this.
 TRACE_TOL = 1e-6
@@ -178,13 +170,36 @@ def _new_rows(S: np.ndarray, Y: np.ndarray, sc: np.ndarray, tol: float = 1e-6) -
 
 
 def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int = 200,
-               tol: float = TRACE_TOL, deadline: Any = None) -> TraceResult:
+               tol: float = TRACE_TOL, deadline: Any = None, direction: str = "c",
+               slice: str = "invariant") -> TraceResult:
     """Test whether ``start`` (a :class:`~optkin.solvers.homotopy.StartSystem` of
     ``model``'s topology) holds every solution of its system (module docstring).
 
     ``stale`` monodromy loops in a row without a new witness end a round; the trace is
     then computed, and a round that fails the test is followed by another (up to
-    ``max_loops`` loops), since the witnesses may be the incomplete set."""
+    ``max_loops`` loops), since the witnesses may be the incomplete set.
+
+    ``direction``: the parameters the test's curve moves, the offset c (``"c"``, any
+    system) or the actuated values (``"qa"``: prismatic actuators only, which the system
+    is polynomial in). ``slice``: the coordinates the hyperplane reads, every algebraic
+    coordinate the symmetry group leaves unchanged (``"invariant"``) or only those of the
+    unknowns that are not periodic angles (``"pose"``: a spatial platform's pose; the
+    test is then one of the curve's projection on them). The traces sum exactly the coordinates the hyperplane reads, and
+    lam. On Tsai's 3-UPU, ``direction="qa", slice="pose"`` needs 2 560 witnesses
+    where the defaults needed 23 304 and 100 minutes and then could not track them all."""
+    if direction not in DIRECTIONS:
+        raise ValueError(f"trace_test: direction must be one of {DIRECTIONS}, got "
+                         f"{direction!r}")
+    if slice not in SLICES:
+        raise ValueError(f"trace_test: slice must be one of {SLICES}, got {slice!r}")
+    if direction == "qa":
+        mech = model.mech
+        rev = [mech.active_names[k] for k, i in enumerate(mech.active_index)
+               if mech.revolute[i]]
+        if rev:
+            raise ValueError(f"trace_test: direction='qa' needs prismatic actuators (the "
+                             f"system polynomial in them); {model.mech.name}'s {rev} are "
+                             "revolute: use direction='c'")
     t0 = time.perf_counter()
     base = _hom._system(model)
     tsys = _trace_system(model)
@@ -203,8 +218,11 @@ def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int 
     tsym = _hom.Symmetry(np.hstack([sym.sign, one]), np.hstack([sym.shift, 0 * one]))
     xr = np.random.default_rng(3).normal(size=(1, n)) + 0j
     inv = np.all(np.abs(tsys.coords(sym.apply(xr)) - tsys.coords(xr)) <= 1e-12, axis=0)
-    if _POSE_SLICE and sym.order > 1:
+    if slice == "pose":
         inv &= np.concatenate([[False, False] if p else [True] for p in tsys.per])
+    if not inv.any():
+        raise ValueError(f"trace_test: slice={slice!r} leaves no coordinate of "
+                         f"{model.mech.name}'s unknowns to slice by: use 'invariant'")
     th0 = np.asarray(start.theta, dtype=complex)
     size = float(np.max(base.scale))
     ysc = max(1.0, size)
@@ -217,7 +235,7 @@ def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int 
     # linear form a through them (a . y = 1)
     def along_c(d: np.ndarray) -> np.ndarray:
         out = np.zeros_like(d)
-        if _DIRECTION == "qa":  # experimental: the curve of the actuated values
+        if direction == "qa":  # the curve of the actuated values
             out[:base.na] = d[:base.na]
         else:
             out[-n:] = d[-n:]
@@ -272,7 +290,13 @@ def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int 
         return np.concatenate([[0.0], th, v, a])
 
     def coords_lam(Y: np.ndarray) -> np.ndarray:
-        return np.hstack([tsys.coords(Y[:, :n]), Y[:, n:n + 1]])
+        """The coordinates the traces sum: those the hyperplane reads, and lam. Only
+        those: the sum of a coordinate that can grow without bound where (a . y - 1) lam
+        stays finite is not affine in t even over a complete set. Tsai's 3-UPU with the
+        pose hyperplane: the sines its leg flips leave unchanged blow up at poses where a
+        leg's direction is isotropic, and their sums departed from the line by 0.118
+        where the pose's and lam's did by 1.5e-10 (the same complete set)."""
+        return np.hstack([tsys.coords(Y[:, :n])[:, inv], Y[:, n:n + 1]])
 
     def sums(Y: np.ndarray) -> np.ndarray:
         return coords_lam(Y).sum(axis=0)
