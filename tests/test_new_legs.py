@@ -66,18 +66,26 @@ def test_upu3_translates_along_200_random_inputs():
 
 def test_upu3_assembly_modes_contain_the_two_translations():
     """The translational solutions of assembly_modes are exactly the two three-sphere
-    intersections; every other solution (the 3-UPU's other operation modes) closes."""
+    intersections; every other solution (the 3-UPU's other operation modes) closes. The
+    default is the homotopy from the shipped start system (verified complete by the trace
+    test): every pose comes in the 8 joint configurations of its legs' flips."""
     m = M.upu3(1.0, 0.5)
     centres = _circle(0.5)
     p = np.array([0.05, -0.08, 1.0])
     rho = np.linalg.norm(p - centres, axis=1)
     modes = optkin.assembly_modes(m, rho)
+    assert modes.stats.method == "homotopy" and modes.complete, modes.info["message"]
     translational = [s for s in modes if np.abs(s.pose[:3, :3] - np.eye(3)).max() < 1e-8]
     want = _three_spheres(centres, rho)
-    got = sorted((s.pose[:3, 3] for s in translational), key=lambda v: -v[2])
+    poses: list[np.ndarray] = []
+    for s in translational:
+        if not any(np.allclose(s.pose[:3, 3], q, atol=1e-9) for q in poses):
+            poses.append(s.pose[:3, 3])
+    got = sorted(poses, key=lambda v: -v[2])
     assert len(got) == 2
     for g, w in zip(got, want):
         assert np.allclose(g, w, atol=1e-9)
+        assert sum(np.allclose(s.pose[:3, 3], g, atol=1e-9) for s in translational) == 8
     model = optkin.get_model(m)
     for s in modes:
         assert np.max(np.abs(model.residual(s.qa, s.x))) < 1e-9

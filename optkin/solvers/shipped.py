@@ -88,7 +88,9 @@ CATALOGUE: list[tuple[str, Callable, bool]] = [
     ("hexa", _lib("hexa"), True),
     # Tsai's 3-UPU at joint level, the library's default geometry (its base radius 1 makes
     # one base coordinate structural): 672 solutions, 84 orbits of its legs' flips
-    # (homotopy.symmetry); not verified (see UNVERIFIED)
+    # (homotopy.symmetry), found by monodromy (seeds 0, 1 and 2 all stop there) and
+    # verified by the trace test along the leg lengths, sliced by the pose (TRACE_OPTIONS:
+    # residual 1.7e-10, 2 560 witnesses, 16 loops, 12 min here)
     ("upu3", _lib("upu3"), True),
 ]
 
@@ -103,26 +105,9 @@ TRACE_OPTIONS: dict[str, dict[str, str]] = {
 #: Start systems shipped although the trace test has not verified them (it cannot yet in
 #: reasonable time), with why: :func:`ship` builds them with a long ``stale`` and stores
 #: them with ``stopped="stale"``, so that a call accounts for every path but never says
-#: ``complete`` (the message says the start system is not verified).
-UNVERIFIED: dict[str, str] = {
-    "upu3": "monodromy stops at 84 orbits of 8 by its 8th loop and finds nothing new in the "
-            "next 31 (seed 0); the trace test's witness set passed 11 000 points after 8 "
-            "loops and was still growing (the hyperplane on the pose alone: 9 400 after 10); "
-            "with the test's curve along the leg lengths (trace._DIRECTION = 'qa') its 2 560 "
-            "witnesses were stable for 7 loops but the trace failed (residual 0.063): the "
-            "set may be incomplete (run again: residual 0.118, 2 560 witnesses, no failed "
-            "path and no two of the 3 904 endpoints within 1e-6: not path jumping). Two "
-            "more monodromy runs from independent random parameters (seeds 1 and 2) also "
-            "stop at 672 (seed 2 once solutions far out are told apart relatively, "
-            "homotopy._distinct), and seed 2's, tracked to the shipped parameters, land on "
-            "640 distinct of the 672 (32 paths failed), none new. Along c (the default) "
-            "the witnesses saturate at 23 304 (22 632 by loop 11, a few orbits more until "
-            "loop 19, none in loops 20-23; 100 min on 2 threads), but the paths of the "
-            "trace's t-tracking (24 648) then failed or ended on one point (24 636 "
-            "distinct): no trace yet (the test now re-tracks such paths). Tsai's 3-UPU with the "
-            "base radius not 1 (no structural unit entry) has many more: 677 orbits after "
-            "12 loops and still growing",
-}
+#: ``complete`` (the message says the start system is not verified). None at present:
+#: Tsai's 3-UPU was, until the trace test summed only the coordinates its slice reads.
+UNVERIFIED: dict[str, str] = {}
 #: Loops in a row without a new solution before an unverified start system is stored.
 UNVERIFIED_STALE = 30
 
