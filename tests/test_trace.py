@@ -140,12 +140,17 @@ def test_shipped_start_systems_load_and_pass_the_trace_test(name, make, monkeypa
     assert T.passed, f"{name}: {T.message}"
 
 
-def test_new_witnesses_are_those_a_pairwise_comparison_finds():
-    """The witnesses' identification (trace._new_rows: windows on a random projection)
-    against the plain comparison of every row with every earlier one, written here, on
-    random sets with copies planted 3e-9 (the same point) and 2e-6 (another) relative
-    apart, near and far out, and on chains of rows 0.8 tolerances apart."""
+@pytest.mark.parametrize("dense", [None, 0], ids=["default", "windows-only"])
+def test_new_witnesses_are_those_a_pairwise_comparison_finds(dense, monkeypatch):
+    """The witnesses' identification (trace._new_rows: windows on a random projection, or
+    every pair at once for few rows) against the plain comparison of every row with every
+    earlier one, written here, on random sets with copies planted 3e-9 (the same point)
+    and 2e-6 (another) relative apart, near and far out, and on chains of rows 0.8
+    tolerances apart; once as it runs and once with the windows for every size."""
     from optkin.solvers.trace import _new_rows
+
+    if dense is not None:
+        monkeypatch.setattr(H, "_DENSE_PAIRS", dense)
 
     def pairwise(S, Y, sc, tol=1e-6):
         out = []
