@@ -305,9 +305,9 @@ def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int 
         """The coordinates the traces sum: those the hyperplane reads, and lam. Only
         those: the sum of a coordinate that can grow without bound where (a . y - 1) lam
         stays finite is not affine in t even over a complete set. Tsai's 3-UPU with the
-        pose hyperplane: the sines its leg flips leave unchanged blow up at poses where a
-        leg's direction is isotropic, and their sums departed from the line by 0.118
-        where the pose's and lam's did by 1.5e-10 (the same complete set)."""
+        pose hyperplane: the sums of the angle coordinates its leg flips leave unchanged
+        departed from the line by up to 0.118 where the pose's and lam's did by 1.5e-10
+        (the same complete set; the other angle coordinates cancel over each orbit)."""
         return np.hstack([tsys.coords(Y[:, :n])[:, inv], Y[:, n:n + 1]])
 
     def sums(Y: np.ndarray) -> np.ndarray:
