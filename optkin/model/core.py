@@ -102,13 +102,13 @@ def _select_rows(st: Structure, p: np.ndarray, mech: Mechanism, samples: int = 4
     non-zero constant means the loop can never close: that is a description error.
     """
     phi = st.phi
-    if phi.shape[0] == 0:
-        return []
     key = ("rows", samples)
     f = st.cache.get(key)
     if f is None:  # once per structure: every geometry of it is checked with this Function,
         # all samples in one call (the rows and their Jacobians side by side), through
         # preallocated buffers (a numpy call of a Function costs 100 us)
+        if phi.shape[0] == 0:  # (an SX's shape costs microseconds: looked at once)
+            return []
         v = ca.vertcat(st.qa, st.x)
         one = ca.Function("rows", [v, st.p], [ca.densify(phi), ca.densify(ca.jacobian(phi, v))])
         fm = one.map("rows_map", "serial", samples, [1], [])
@@ -116,10 +116,9 @@ def _select_rows(st: Structure, p: np.ndarray, mech: Mechanism, samples: int = 4
         n = v.shape[0]
         Z = rng.uniform(-np.pi, np.pi, (samples, n))  # the same draws as one row at a time
         is_len = np.concatenate([np.zeros(st.qa.shape[0], bool), st.x_length])
-        f = st.cache[key] = (cc.FastFn(fm), Z, is_len, threading.Lock())
-    fm, Z, is_len, lock = f
+        f = st.cache[key] = (cc.FastFn(fm), Z, is_len, threading.Lock(), int(phi.shape[0]))
+    fm, Z, is_len, lock, m = f
     n = Z.shape[1]
-    m = phi.shape[0]
     Z = Z * np.where(is_len, float(p[-1]) / np.pi, 1.0)
     with lock:
         out = fm(Z.ravel(), p)
@@ -276,8 +275,8 @@ def _topology_for(mech: Mechanism, p: np.ndarray) -> Topology:
     st = _STRUCTURES.get(mech.topology, lambda: build_structure(mech))
     keep = _select_rows(st, p, mech)
     full = (mech.topology, tuple(keep))
-    key = hashlib.sha256(repr(full).encode()).hexdigest()[:16]
-    return _TOPOLOGIES.get(full, lambda: Topology(st, keep, key, mech.redundant))
+    return _TOPOLOGIES.get(full, lambda: Topology(
+        st, keep, hashlib.sha256(repr(full).encode()).hexdigest()[:16], mech.redundant))
 
 
 class Model:
