@@ -671,3 +671,20 @@ def test_working_modes_at_a_pose_match_the_elbow_signs():
             assert mode[j] == np.sign(-(P - C) @ dC)
     d = wm.to_dict()
     assert d["count"] == 4 and d["count_at_pose"] == 4
+
+
+def test_checked_options_are_reused_only_for_the_same_values_types_and_budget(monkeypatch):
+    """assembly_modes checks a set of option values once (enumerate._assembly_options):
+    a value equal but of another type (1 for True) is still refused, and a time limit the
+    budget allowed is refused once the budget is lowered."""
+    A = np.array([[0, 0], [10, 0], [4, 8]], float)
+    B = np.array([[-1, -0.5], [1, -0.5], [0, 1]], float)
+    m = optkin.mechanisms.rpr3(A, B)
+    c, s = np.cos(0.2), np.sin(0.2)
+    qa = np.linalg.norm(np.array([4.0, 3.0]) + B @ np.array([[c, -s], [s, c]]).T - A, axis=1)
+    assert optkin.assembly_modes(m, qa, certify=True, time_limit=5.0).success
+    with pytest.raises(optkin.MechanismError, match="certify must be True or False"):
+        optkin.assembly_modes(m, qa, certify=1, time_limit=5.0)
+    monkeypatch.setenv("OPTKIN_TIME_BUDGET", "2")
+    with pytest.raises(optkin.MechanismError, match="exceeds the time budget"):
+        optkin.assembly_modes(m, qa, certify=True, time_limit=5.0)
