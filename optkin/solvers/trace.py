@@ -196,9 +196,10 @@ def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int 
     is polynomial in). ``slice``: the coordinates the hyperplane reads, every algebraic
     coordinate the symmetry group leaves unchanged (``"invariant"``) or only those of the
     unknowns that are not periodic angles (``"pose"``: a spatial platform's pose; the
-    test is then one of the curve's projection on them). The traces sum exactly the coordinates the hyperplane reads, and
-    lam. On Tsai's 3-UPU, ``direction="qa", slice="pose"`` needs 2 560 witnesses
-    where the defaults needed 23 304 and 100 minutes and then could not track them all."""
+    test is then one of the curve's projection on them). The traces sum exactly the
+    coordinates the hyperplane reads, and lam. On Tsai's 3-UPU, ``direction="qa",
+    slice="pose"`` needs 2 560 witnesses where the defaults needed 23 304 and 100
+    minutes and then could not track them all."""
     if direction not in DIRECTIONS:
         raise ValueError(f"trace_test: direction must be one of {DIRECTIONS}, got "
                          f"{direction!r}")
