@@ -99,16 +99,22 @@ def test_homotopy_rpr3_random_200(benchmark):
                      np.linalg.norm(p + b @ R.T - a, axis=1)))
     optkin.assembly_modes(inst[0][0], inst[0][3], method="homotopy")  # start system, compile
     _compiled(inst[0][0])
-    # each in its own loop (interleaved, the sextic's numpy calls between two homotopy
-    # calls had evicted its code and data: 2.4 ms a first call instead of 1.4)
+    # in blocks of 20 instances, the homotopy's then the sextic's: within a block each
+    # method in its own loop (interleaved call by call, the sextic's numpy calls between
+    # two homotopy calls had evicted its code and data: 2.4 ms a first call instead of
+    # 1.4), and the blocks alternating so that this machine's drift (20-40 % over a
+    # minute) weighs on both alike (two whole loops, one after the other, gave ratios of
+    # 1.7-2.3 in consecutive runs)
     hom, poly, complete = [], [], 0
-    for m, _, _, s in inst:  # the first call on each new geometry
-        t0 = time.perf_counter()
-        res = optkin.assembly_modes(m, s, method="homotopy")
-        hom.append(time.perf_counter() - t0)
-        complete += res.complete
-    for _, a, b, s in inst:
-        poly.append(median_time(lambda a=a, b=b, s=s: polynomial_floor(a, b, s), min_time=0.01))
+    for k in range(0, len(inst), 20):
+        for m, _, _, s in inst[k:k + 20]:  # the first call on each new geometry
+            t0 = time.perf_counter()
+            res = optkin.assembly_modes(m, s, method="homotopy")
+            hom.append(time.perf_counter() - t0)
+            complete += res.complete
+        for _, a, b, s in inst[k:k + 20]:
+            poly.append(median_time(lambda a=a, b=b, s=s: polynomial_floor(a, b, s),
+                                    min_time=0.01))
     benchmark.pedantic(lambda: [optkin.assembly_modes(m, s, method="homotopy")
                                 for m, _, _, s in inst], rounds=3, iterations=1)
     warm = []  # the same instances again: models built, nothing new
