@@ -325,6 +325,51 @@ def test_khalil_four_bar_against_circle_intersections():
     assert both >= 10
 
 
+def test_khalil_five_bar_against_circle_intersections():
+    """The five-bar written as a Khalil table (one loop cut at P; passive t2, t4, t3; the
+    rows of test_continuation): its start system is built here by monodromy and verified
+    by the trace test (no structural bound for a table), then every call accounts for its
+    2 paths; the point P = C + L2 u(t1 + t2) of each real mode is one of the intersections
+    of the circles (C, L2) and (D, L3), C = L1 u(t1), D = (L0, 0) + L4 u(t5), computed
+    here, and the modes are the multistart's."""
+    from test_assembly_modes import circle_intersections
+
+    def table(L0, L1, L2, L3, L4):
+        rows = [dict(a=0, mu=1, sigma=0, d=0, theta="t1"),
+                dict(a=1, mu=0, sigma=0, d=L1, theta="t2"),
+                dict(a=0, mu=1, sigma=0, d=L0, theta="t5"),
+                dict(a=3, mu=0, sigma=0, d=L4, theta="t4"),
+                dict(a=2, mu=0, sigma=0, d=L2, theta="t3"),
+                dict(a=4, mu=0, sigma=2, d=L3, theta=0)]
+        return optkin.Mechanism.from_khalil(rows, loops=1, name="five-bar (Khalil)")
+
+    def u(a):
+        return np.array([np.cos(a), np.sin(a)])
+
+    rng = np.random.default_rng(4)
+    both = 0
+    for _ in range(12):
+        L = rng.uniform(0.5, 2.0, 5)
+        th = rng.uniform(-np.pi, np.pi, 2)
+        m = table(*L)
+        modes = optkin.assembly_modes(m, th, method="homotopy", time_limit=300)
+        assert modes.complete and modes.stats.root_count == 2, modes.info["message"]
+        assert modes.info["monodromy_stopped"] == "trace"
+        C, D = L[1] * u(th[0]), np.array([L[0], 0.0]) + L[4] * u(th[1])
+        ref = circle_intersections(C, L[2], D, L[3]) or []
+        assert len(modes) == len(ref)
+        i2 = m.joint_names.index("t2")
+        got = [C + L[2] * u(th[0] + r.q[i2]) for r in modes]
+        for p in ref:
+            assert min(np.max(np.abs(g - p)) for g in got) < 1e-9
+        ms = optkin.assembly_modes(m, th, method="multistart", seed=0)
+        assert len(ms) == len(modes)
+        for r in ms:
+            assert min(np.max(np.abs(np.angle(np.exp(1j * (r.q - h.q))))) for h in modes) < 1e-8
+        both += len(ref) == 2
+    assert both >= 4
+
+
 def test_khalil_sr400_against_the_multistart():
     m = optkin.mechanisms.sr400()
     rng = np.random.default_rng(1)
