@@ -138,13 +138,13 @@ def ship(names: list[str] | None = None, out=sys.stdout) -> None:
                   f"{time.perf_counter() - t0:.1f} s -> {path.name}", file=out)
             continue
         topts = TRACE_OPTIONS.get(name, {})
-        S = H.start_system(model, seed=0, deadline=Deadline(3600.0 if slow else 600.0),
-                           trace_options=topts)
+        limit = 3600.0 if slow else 600.0
+        S = H.start_system(model, seed=0, deadline=Deadline(limit), trace_options=topts)
         if S.stopped not in ("bound", "trace"):
             print(f"{name}: not shipped, monodromy stopped by {S.stopped}", file=out)
             continue
         if not np.isfinite(S.trace):
-            T = trace_test(model, S, deadline=Deadline(3600.0 if slow else 600.0), **topts)
+            T = trace_test(model, S, deadline=Deadline(limit), **topts)
             if not T.passed:
                 print(f"{name}: not shipped, {T.message}", file=out)
                 continue

@@ -211,7 +211,7 @@ def trace_test(model, start: Any, seed: int = 0, stale: int = 5, max_loops: int 
                if mech.revolute[i]]
         if rev:
             raise ValueError(f"trace_test: direction='qa' needs prismatic actuators (the "
-                             f"system polynomial in them); {model.mech.name}'s {rev} are "
+                             f"system polynomial in them); {mech.name}'s {rev} are "
                              "revolute: use direction='c'")
     t0 = time.perf_counter()
     base = _hom._system(model)
