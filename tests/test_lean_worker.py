@@ -35,6 +35,35 @@ def test_points_in_ring_agrees_with_matplotlib():
     assert points_in_ring(sq, [0.5, 0.5])[0] and not points_in_ring(sq, [1.5, 0.5])[0]
 
 
+def test_points_in_ring_on_grids_and_long_rings_agrees_with_matplotlib():
+    """Points sharing the y of vertices and horizontal edges (a quarter grid on a ring
+    with vertices on it; some points lie on the ring, where the rule may go either way,
+    so the reference is the n x m crossing count, written here), and a ring long enough that the (edge, point) pairs are
+    processed in several runs (more than ``_CHUNK``), and no points at all."""
+    from optkin.analysis import planar
+
+    rng = np.random.default_rng(11)
+    X, Y = np.meshgrid(np.arange(-5, 6) / 4, np.arange(-5, 6) / 4)
+    G = np.c_[X.ravel(), Y.ravel()] + [0.01, 0.0]  # off the vertical edges, on the rows
+    R = np.round(rng.uniform(-1, 1, (30, 2)) * 4) / 4
+    A, B = R[None], np.roll(R, -1, axis=0)[None]
+    px, py = G[:, :1], G[:, 1:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = A[..., 0] + (py - A[..., 1]) * (B[..., 0] - A[..., 0]) / (B[..., 1] - A[..., 1])
+    cross = ((A[..., 1] > py) != (B[..., 1] > py)) & (px < x)
+    expect = cross.sum(axis=1) % 2 == 1
+    assert 10 < expect.sum() < len(G) - 10
+    assert np.array_equal(points_in_ring(R, G), expect)
+    th = np.linspace(0, 2 * np.pi, 3000, endpoint=False)
+    R = np.c_[np.cos(th) * (1 + 0.3 * np.cos(7 * th)), np.sin(th)]
+    P = rng.uniform([-1.4, -0.99], [1.4, 0.99], (100_000, 2))
+    assert len(P) * 2 > 1.5 * planar._CHUNK  # each point's line meets the ring twice or more
+    got = points_in_ring(R, P)
+    assert np.array_equal(got, Path(R).contains_points(P))
+    assert 0.3 < got.mean() < 0.6
+    assert points_in_ring(R, np.zeros((0, 2))).shape == (0,)
+
+
 @pytest.mark.parametrize("tol", [1e-9, 5e-3])
 def test_close_pairs_agrees_with_a_kd_tree(tol):
     rng = np.random.default_rng(3)

@@ -102,24 +102,47 @@ def points_in_ring(R: np.ndarray, P: np.ndarray) -> np.ndarray:
     """Which of the points ``P`` (n x 2) lie inside the closed ring ``R`` (m x 2, first
     vertex not repeated or repeated): the even-odd crossing rule, a ray to +x.
 
-    Points on the ring itself may go either way. Written here rather than borrowed from
-    ``matplotlib.path`` (the same rule in C): importing matplotlib costs a worker process
-    about 0.3 s, more than most of the problems it runs.
+    Points on the ring itself may go either way. An edge can only cross the ray of a point
+    whose y lies in the edge's half-open y-range, so the points are sorted by y and each
+    edge visits only the run of points in its range (two binary searches): the work is
+    the number of (edge, point) crossings, about n times the few edges a horizontal line
+    meets, instead of n x m (20-40x less on a five-bar's traced aspects). The crossing's
+    x is computed from the same expression as a brute-force sweep, so the answer is the
+    same bit for bit. Written here rather than borrowed from ``matplotlib.path`` (the same
+    rule in C): importing matplotlib costs a worker process about 0.3 s, more than most
+    of the problems it runs.
     """
     P = np.atleast_2d(np.asarray(P, dtype=float))
     R = np.asarray(R, dtype=float)
+    n = len(P)
     A, B = R, np.roll(R, -1, axis=0)
-    inside = np.zeros(len(P), dtype=bool)
-    px, py = P[:, 0, None], P[:, 1, None]
-    step = max(1, _CHUNK // max(len(P), 1))
-    for s0 in range(0, len(A), step):  # edges in chunks: n x chunk temporaries
-        a, b = A[s0:s0 + step], B[s0:s0 + step]
-        ay, by = a[None, :, 1], b[None, :, 1]
-        straddle = (ay > py) != (by > py)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x = a[None, :, 0] + (py - ay) * (b[None, :, 0] - a[None, :, 0]) / (by - ay)
-        inside ^= (np.count_nonzero(straddle & (px < x), axis=1) % 2).astype(bool)
-    return inside
+    if n == 0 or len(A) == 0:
+        return np.zeros(n, dtype=bool)
+    # (ay > py) != (by > py)  <=>  min(ay, by) <= py < max(ay, by)
+    lo_y, hi_y = np.minimum(A[:, 1], B[:, 1]), np.maximum(A[:, 1], B[:, 1])
+    order = np.argsort(P[:, 1], kind="stable")
+    ys = P[order, 1]
+    first = np.searchsorted(ys, lo_y, side="left")
+    stop = np.searchsorted(ys, hi_y, side="left")
+    count = np.maximum(stop - first, 0)
+    odd = np.zeros(n, dtype=np.int64)
+    ends = np.cumsum(count)
+    e0 = 0
+    while e0 < len(A):  # edges in runs of about _CHUNK (edge, point) pairs
+        e1 = int(np.searchsorted(ends, (ends[e0 - 1] if e0 else 0) + _CHUNK, side="right"))
+        e1 = max(e1, e0 + 1)
+        c = count[e0:e1]
+        tot = int(c.sum())
+        if tot:
+            edge = np.repeat(np.arange(e0, e1), c)
+            offs = np.cumsum(c) - c
+            k = order[np.arange(tot) - np.repeat(offs - first[e0:e1], c)]
+            a, b = A[edge], B[edge]
+            py = P[k, 1]
+            x = a[:, 0] + (py - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+            odd += np.bincount(k[P[k, 0] < x], minlength=n)
+        e0 = e1
+    return (odd % 2).astype(bool)
 
 
 def point_in_face(f: Face, P: np.ndarray) -> np.ndarray:
