@@ -49,6 +49,40 @@ def test_a_run_takes_the_prestarted_worker_even_while_it_starts(monkeypatch):
             w.close()
 
 
+def test_a_ready_worker_starts_its_unit_before_the_next_worker_is_up(monkeypatch):
+    """With several workers, the first that is up takes the longest unit at once: the
+    run does not wait until the last of its workers has booted (the checkout of the
+    second worker is held here until a unit has started, or 20 s)."""
+    import threading
+
+    threads = 5  # an environment no other test uses
+    key = wk._env_key(wk._worker_env(threads))
+    started = threading.Event()
+    waited: list[bool] = []
+    real = wk._checkout
+
+    def checkout(env, events):
+        if wk._IDLE.get(key):  # the prestarted, ready worker
+            return real(env, events)
+        waited.append(started.wait(timeout=20))  # a worker still to boot
+        return real(env, events)
+
+    monkeypatch.setattr(wk, "_checkout", checkout)
+    try:
+        assert wk.prestart(1, threads=threads) == 1
+        with wk._BOOTED:
+            assert wk._BOOTED.wait_for(lambda: not wk._BOOTING.get(key), 60)
+        out = wk.run_jobs([wk.Job(n, _spec(n)) for n in "ab"], n_workers=2,
+                          threads=threads, on_start=lambda job: started.set())
+        assert sorted(o.kind for o in out) == ["done", "done"]
+        assert waited == [True]
+    finally:
+        with wk._IDLE_LOCK:
+            idle = wk._IDLE.pop(key, [])
+        for w in idle:
+            w.close()
+
+
 def test_workers_do_not_inherit_dasks_malloc_trim(monkeypatch):
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
     for threads in (None, 1):

@@ -588,7 +588,11 @@ def run_jobs(
             workers = [w for w in workers if not w.dead]
             while len(workers) < n_workers and len(workers) < len(pending) + sum(
                     w.job is not None for w in workers):
+                # a worker that is ready starts its unit now, not once the next one has
+                # booted (:func:`_checkout` waits for a prestarted worker: without this
+                # the first unit began when the last of the run's workers was up)
                 workers.append(_checkout(env, events))
+                assign(workers[-1])
             for w in workers:
                 if w.job is None and w.ready:
                     assign(w)
