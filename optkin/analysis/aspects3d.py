@@ -22,11 +22,30 @@ box and a representative configuration come from its faces.
 
 Measured on the cuspidal 3-RPR of Zein, Wenger and Chablat with strokes [10, 30]
 (tests/test_aspects3d.py): 2 aspects of volumes 2097.03 and 2069.38 (length^2 rad) from
-36 even sections and 47 added (benchmarks/test_aspects3d.py: 2.33 s against the 240^3
-grid's 2.73 s in the same run, 1.2x; 1.3x under load); 198 sections at step 0.08 give 2096.93 and 2068.66; voxel grids of
-the sign of det A find the same two components, 2097.7 and 2069.5 at 240^3, 2096.6 and
-2068.2 at 320^3, 2097.4 and 2068.7 at 400^3, 2097.3 and 2068.7 at 480^3 (27 s). Both
-curves of its sections come in closed form: the strokes' limit curves are the legs'
+36 even sections and 47 added (benchmarks/test_aspects3d.py: 2.36-2.86 s against the 240^3
+grid's 3.0 s in the same run, 1.05-1.3x). Voxel grids of the sign of det A find the same two
+components, 2097.7 and 2069.5 at 240^3, 2096.6 and 2068.2 at 320^3, 2097.4 and 2068.7 at
+400^3, 2097.3 and 2068.7 at 480^3 (27 s). More even sections move the volumes slowly, by
+less at each doubling but not by a clean power of it (2026-12-06, the same code):
+
+======  ========  =========  =========
+slices  sections  det A > 0  det A < 0
+======  ========  =========  =========
+36      83        2097.028   2069.383
+72      110       2097.030   2068.872
+144     169       2097.087   2068.779
+288     302       2097.165   2068.675
+576     585       2097.221   2068.605
+======  ========  =========  =========
+
+(16.8 s for 576.) The section areas themselves agree where the orientations coincide (to
+2e-12); what converges slowly is the integral over phi: each aspect's area has steep,
+kinked stretches away from any event the refinement locates (near phi = -0.1, 0 and
+0.9-1.04, where the two signs' areas trade tens of units within 0.02 rad), so that the
+trapezoid rule's curvature term is of little use there. An error estimate per interval
+driving the refinement (as for the events) is the next step; the volumes are within
+4e-4 of the finest grids', as the 240^3 grid's are. Both curves of its sections come in
+closed form: the strokes' limit curves are the legs'
 circles, the parallel curve a conic (:func:`optkin.analysis.continuation._conic_arcs`;
 3.0-3.3 s of CPU against 4.3-4.5 s traced, in one run). The method is exact in x and y
 but not in phi, and not yet the 5x of the issue tracker's target (about 30 ms a section:
