@@ -20,38 +20,37 @@ the arcs between its traced vertices (:func:`optkin.analysis.planar.arc_area`), 
 integral the trapezoid rule less its curvature term (:func:`_integrate`); its bounding
 box and a representative configuration come from its faces.
 
+The refinement also halves gaps where the phi integral's estimated error is large
+(``vol_tol``, :func:`_interval_errors`): the areas have kinked, steep stretches away from
+any event (near phi = -0.1, 0 and 0.9-1.04 on the 3-RPR below, where the two signs' areas
+trade tens of units within 0.02 rad), across which the even sections alone converge
+slowly.
+
 Measured on the cuspidal 3-RPR of Zein, Wenger and Chablat with strokes [10, 30]
-(tests/test_aspects3d.py): 2 aspects of volumes 2097.03 and 2069.38 (length^2 rad) from
-36 even sections and 47 added (benchmarks/test_aspects3d.py: 2.36-2.86 s against the 240^3
-grid's 3.0 s in the same run, 1.05-1.3x). Voxel grids of the sign of det A find the same two
-components, 2097.7 and 2069.5 at 240^3, 2096.6 and 2068.2 at 320^3, 2097.4 and 2068.7 at
-400^3, 2097.3 and 2068.7 at 480^3 (27 s). More even sections move the volumes slowly, by
-less at each doubling but not by a clean power of it (2026-12-06, the same code):
+(tests/test_aspects3d.py), 2026-12-06, the volumes of its 2 aspects (length^2 rad):
 
-======  ========  =========  =========
-slices  sections  det A > 0  det A < 0
-======  ========  =========  =========
-36      83        2097.028   2069.383
-72      110       2097.030   2068.872
-144     169       2097.087   2068.779
-288     302       2097.165   2068.675
-576     585       2097.221   2068.605
-======  ========  =========  =========
+==============  ========  ==========  ==========  ======
+refinement      sections  det A > 0   det A < 0   time
+==============  ========  ==========  ==========  ======
+events only     83        2097.028    2069.383    2.3 s
+576 even        585       2097.221    2068.605    16.8 s
+vol_tol 1e-3    123       2097.213    2068.590    3.8 s
+vol_tol 1e-4    237       2097.253    2068.599    7.4 s
+vol_tol 1e-5    656       2097.227    2068.597    21 s
+vol_tol 3e-6    1209      2097.229    2068.598    40 s
+==============  ========  ==========  ==========  ======
 
-(16.8 s for 576.) The section areas themselves agree where the orientations coincide (to
-2e-12); what converges slowly is the integral over phi: each aspect's area has steep,
-kinked stretches away from any event the refinement locates (near phi = -0.1, 0 and
-0.9-1.04, where the two signs' areas trade tens of units within 0.02 rad), so that the
-trapezoid rule's curvature term is of little use there. An error estimate per interval
-driving the refinement (as for the events) is the next step; the volumes are within
-4e-4 of the finest grids', as the 240^3 grid's are. Both curves of its sections come in
-closed form: the strokes' limit curves are the legs'
+(36 even sections in each but the second; the events only: ``vol_tol=inf``.) Voxel grids
+of the sign of det A find the same two components and approach these volumes as they are
+refined: 2097.7 and 2069.5 at 240^3 (3 s), 2096.6 and 2068.2 at 320^3, 2097.4 and 2068.7
+at 400^3, 2097.3 and 2068.7 at 480^3 (27 s). The default (1e-3) is within 1e-5 of the
+finest refinement, the 480^3 grid within 5e-5 (benchmarks/test_aspects3d.py times both).
+The section areas themselves agree wherever the orientations coincide (to 2e-12). Both
+curves of its sections come in closed form: the strokes' limit curves are the legs'
 circles, the parallel curve a conic (:func:`optkin.analysis.continuation._conic_arcs`;
-3.0-3.3 s of CPU against 4.3-4.5 s traced, in one run). The method is exact in x and y
-but not in phi, and not yet the 5x of the issue tracker's target (about 30 ms a section:
-the faces of the arrangement, their interior points and labels, the links between
-sections): the exact topology-changing orientations and a batched section are the next
-steps. An aspect whose whole
+3.0-3.3 s of CPU against 4.3-4.5 s traced, in one run). A section costs about 30 ms (the
+faces of the arrangement, their interior points and labels, the links between sections).
+An aspect whose whole
 extent in phi is shorter than ``min_gap`` may be missed, and a neck thinner than it in
 phi may join or split aspects.
 
@@ -59,9 +58,10 @@ Legs with several postures get their aspects per working mode the same way, at t
 sections' finer default step (see ``step``): tested on the 3-RRR (the 3-PRR takes the
 same path, not compared with a grid yet). Measured on a 3-RRR (equilateral
 base of side 10 and platform of circumradius 2, links 5 and 4; tests/test_aspects3d.py):
-16 aspects, two per working mode, volumes 154.77 (2), 148.50 (6), 107.71 (6) and 101.44
-(2) from 143 sections, about 60 s here, against a 200^3 voxel grid's 16 components,
-154.80, 148.44-148.45, 107.63-107.64 and 101.31 (101.24 at 160^3). A design whose legs
+16 aspects, two per working mode, volumes 154.87 (2), 148.51 (6), 107.67 (6) and 101.31
+(2) from 217 sections, 98 s here (154.77, 148.50, 107.71 and 101.44 from 143 sections in
+54 s with ``vol_tol=inf``), against a 200^3 voxel grid's 16 components, 154.80,
+148.44-148.45, 107.63-107.64 and 101.31 (101.24 at 160^3). A design whose legs
 fold completely (links of equal length: the inner serial circle shrinks to the base
 joint, where the leg's inverse is singular) is not handled reliably: with links 5 and 5
 the curves of 86 of 198 sections stopped early near phi = +-1.4 and the aspects fell apart
@@ -95,10 +95,11 @@ ASPECTS3D_DEFAULTS: dict[str, Any] = {
     "modes": True,  # count the assembly modes each aspect holds at its representative q_a
     "tiny": 1e-5,  # a face under this fraction of its section's largest area may appear
     # or vanish between two sections without refinement
-    # largest continuation step of the sections' curves (scaled units, > 0; None: 0.25 when
-    # every actuator is its leg's length, else the sections' default 0.08)
-    "step": None,
+    "step": None,  # largest continuation step of the sections' curves (scaled units, > 0;
+    # None: 0.25 when every actuator is its leg's length, else the sections' default 0.08)
     "time_limit": 300.0,  # seconds (capped by the time budget); past it no gap is refined
+    "vol_tol": 1e-3,  # gaps are also halved where the phi integral's estimated error
+    # exceeds this fraction of the total volume (shared by width; inf: events only, > 0)
 }
 
 
@@ -391,6 +392,14 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
         0.08), else the sections' own default 0.08 (legs with a driven revolute or slider
         add their serial singularity curves: a 3-RRR's inner circle, of radius
         ``|l1 - l2|``, which 0.25 does not resolve: its aspects fell apart into 64 pieces).
+    vol_tol : float
+        Gaps are also halved, down to ``min_gap``, where the estimated error of the
+        integral over phi (:func:`_interval_errors`, summed over the aspects) exceeds this
+        fraction of the aspects' total volume times the gap's share of the circle: the
+        areas have kinked, steep stretches away from any birth, death, split or merge,
+        where the even sections alone converge slowly. On the cuspidal 3-RPR the default
+        1e-3 gives volumes within 1e-5 of the converged ones (123 sections, 3.8 s, against
+        83 sections, 2.3 s and 4e-4 with ``inf``, which refines at the events only).
     time_limit : float
         Seconds (capped by the time budget); past it no gap is refined any more and the
         result says so (``success=False``, status ``"time_limit"``).
@@ -413,6 +422,7 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     min_gap = num("min_gap", lo=0.0, lo_open=True)
     tiny = num("tiny", lo=0.0)
     step = None if opts["step"] is None else num("step", lo=0.0, lo_open=True)
+    vol_tol = num("vol_tol", lo=0.0, lo_open=True, finite=False)
     deadline = Deadline(min(num("time_limit", lo=0.0, lo_open=True), time_budget()))
     from .aspects import aspects
 
@@ -513,50 +523,95 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     # death of a small face needs no refinement: it is one), down to min_gap
     work = [(phis[k], phis[k + 1] if k + 1 < len(phis) else phis[0] + 2 * np.pi)
             for k in range(len(phis))]
-    done_gaps = []
+    done_gaps: list[tuple[float, float, list[tuple[int, int]]]] = []
     late = False
-    while work:
-        a, b = work.pop()
-        if deadline.expired():  # out of time: the sections not yet traced stay untraced
-            late = True
-            if all(((q + np.pi) % (2 * np.pi)) - np.pi in cache for q in (a, b)):
-                done_gaps.append((a, b, links(a, b)[0]))
-            continue
-        pairs, ua, ub = links(a, b)
-        wa = ((a + np.pi) % (2 * np.pi)) - np.pi
-        wb = ((b + np.pi) % (2 * np.pi)) - np.pi
-        # a face near the sections' sliver threshold may be kept in one section and
-        # dropped in the next: its lack of a partner is no event to locate
-        large = any(not sliver(wa, i) for i in ua) or any(not sliver(wb, j) for j in ub)
-        if not large or b - a <= min_gap:
-            done_gaps.append((a, b, pairs))
-            continue
-        mid = 0.5 * (a + b)
-        work += [(a, mid), (mid, b)]
+    arc: dict[tuple[float, int], float] = {}
+
+    def wrap(q: float) -> float:
+        return ((q + np.pi) % (2 * np.pi)) - np.pi
+
+    def grouped() -> list[list[tuple[float, int]]]:
+        """The faces of every aspect so far, (phi, index) each: faces of neighbouring
+        sections joined by the links of their gap."""
+        find = _Find()
+        for p in cache:
+            for i in range(len(faces(p))):
+                find.root((p, i))
+        for a, b, pairs in done_gaps:
+            for i, j in pairs:
+                find.join((wrap(a), i), (wrap(b), j))
+        groups: dict[Any, list] = {}
+        for p in sorted(cache):
+            for i in range(len(faces(p))):
+                groups.setdefault(find.root((p, i)), []).append((p, i))
+        return list(groups.values())
+
+    def areas(members: list[tuple[float, int]], order: list[float]) -> np.ndarray:
+        """An aspect's section areas at the orientations ``order`` (0 where it has none)."""
+        area = dict.fromkeys(order, 0.0)
+        for p, i in members:
+            if (p, i) not in arc:
+                arc[(p, i)] = face_arc_area(faces(p)[i][2])
+            area[p] += arc[(p, i)]
+        return np.array([area[p] for p in order])
+
+    while True:
+        while work:
+            a, b = work.pop()
+            if deadline.expired():  # out of time: the sections not yet traced stay untraced
+                late = True
+                if all(wrap(q) in cache for q in (a, b)):
+                    done_gaps.append((a, b, links(a, b)[0]))
+                continue
+            pairs, ua, ub = links(a, b)
+            wa, wb = wrap(a), wrap(b)
+            # a face near the sections' sliver threshold may be kept in one section and
+            # dropped in the next: its lack of a partner is no event to locate
+            large = any(not sliver(wa, i) for i in ua) or any(not sliver(wb, j) for j in ub)
+            if not large or b - a <= min_gap:
+                done_gaps.append((a, b, pairs))
+                continue
+            mid = 0.5 * (a + b)
+            work += [(a, mid), (mid, b)]
+        if not np.isfinite(vol_tol) or late or deadline.expired() or any(
+                not section(p).success for p in cache):
+            break
+        # refine for the volumes: halve each gap whose share of the integral's estimated
+        # error (:func:`_interval_errors`, summed over the aspects) exceeds its share
+        # of vol_tol times the aspects' total volume
+        order = sorted(cache)
+        est = np.zeros(len(order))
+        total = 0.0
+        for members in grouped():
+            if len(members) == 1 and sliver(*members[0]):
+                continue
+            e, v = _interval_errors(np.array(order), areas(members, order))
+            est += e
+            total += abs(v)
+        h = np.diff(np.r_[order, order[0] + 2 * np.pi])
+        coarse = {order[k] for k in np.flatnonzero(
+            (est > vol_tol * total * h / (2 * np.pi)) & (h > 2 * min_gap))}
+        if not coarse:
+            break
+        keep = []
+        for a, b, pairs in done_gaps:
+            if wrap(a) in coarse:
+                mid = 0.5 * (a + b)
+                work += [(a, mid), (mid, b)]
+            else:
+                keep.append((a, b, pairs))
+        done_gaps = keep
     bad = [section(p) for p in cache if not section(p).success]
     if bad:
         return Aspects3D(mech.name, [], np.array(sorted(cache)), False, bad[0].status,
                          f"a section failed: {bad[0].message}", time.perf_counter() - t0,
                          (model.x_names[0], model.x_names[1], angle))
-    # link faces of neighbouring sections
-    find = _Find()
-    for p in cache:
-        for i in range(len(faces(p))):
-            find.root((p, i))
-    for a, b, pairs in done_gaps:
-        wa = ((a + np.pi) % (2 * np.pi)) - np.pi
-        wb = ((b + np.pi) % (2 * np.pi)) - np.pi
-        for i, j in pairs:
-            find.join((wa, i), (wb, j))
-    groups: dict[Any, list] = {}
-    for p in sorted(cache):
-        for i in range(len(faces(p))):
-            groups.setdefault(find.root((p, i)), []).append((p, i))
+    groups = grouped()
     order = sorted(cache)
     spacing = 2 * np.pi / int(slices)
     out: list[Aspect3D] = []
     slivers = 0
-    for members in groups.values():
+    for members in groups:
         if len(members) == 1:
             # a face of about the sections' sliver size (which one section keeps and the
             # next drops, so the refinement does not locate it) seen in one section only:
@@ -566,10 +621,7 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
                 slivers += 1
                 continue
         secs = [(p, faces(p)[i]) for p, i in members]
-        area = dict.fromkeys(order, 0.0)
-        for p, (_, _, f, _) in secs:
-            area[p] += face_arc_area(f)
-        vol = _integrate(np.array(order), np.array([area[p] for p in order]))
+        vol = _integrate(np.array(order), areas(members, order))
         pts = np.vstack([f.outer for _, (_, _, f, _) in secs])
         ph = np.unique([p for p, _ in secs])
         # its extent in phi: the circle minus the largest gap between its sections (a
@@ -628,6 +680,30 @@ def _integrate(phi: np.ndarray, A: np.ndarray) -> float:
     mid = 0.5 * (D[:-1] + D[1:])  # on the interval from phi[k] to phi[k + 1]
     corr = np.where(np.isfinite(mid), h[1:n + 1] ** 3 / 12.0 * mid, 0.0)
     return trap - float(np.sum(corr))
+
+
+def _interval_errors(phi: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, float]:
+    """An estimate of the error of :func:`_integrate` on each interval (from ``phi[k]`` to
+    the next, round the circle), and the integral. Where both ends have the second
+    divided difference the correction uses, their mean stands for f'' on the interval:
+    the error is then about h^3 / 24 times their difference (a kink in the area between
+    them makes it large); where only one has it the interval is integrated by the plain
+    trapezoid, whose error is about h^3 / 12 times that one; where neither has (a face born
+    or dying: the events' own refinement) it is not estimated."""
+    n = len(phi)
+    P = np.r_[phi[-1] - 2 * np.pi, phi, phi[0] + 2 * np.pi]
+    F = np.r_[A[-1], A, A[0]]
+    h = np.diff(P)
+    d2 = 2 * ((F[2:] - F[1:-1]) / h[1:] - (F[1:-1] - F[:-2]) / h[:-1]) / (h[1:] + h[:-1])
+    d2[(F[:-2] <= 0) | (F[1:-1] <= 0) | (F[2:] <= 0)] = np.nan
+    D = np.r_[d2, d2[0]]
+    hk = h[1:n + 1]
+    lo, hi = D[:-1], D[1:]
+    both = np.isfinite(lo) & np.isfinite(hi)
+    one = np.where(np.isfinite(lo), lo, np.where(np.isfinite(hi), hi, 0.0))
+    err = np.where(both, hk ** 3 / 24 * np.abs(np.nan_to_num(lo - hi)),
+                   hk ** 3 / 12 * np.abs(one))
+    return err, _integrate(phi, A)
 
 
 def _count_modes(mech, free: _FreeTest, out, order) -> None:
