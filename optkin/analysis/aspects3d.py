@@ -648,7 +648,7 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     early = [p for p in order if cache[p].early]
     msg = (f"{n} aspect(s) of {mech.name} in (x, y, {angle}) from {len(order)} sections "
            f"({int(slices)} even, {len(order) - int(slices)} added where the sections' faces "
-           f"change); volumes {[round(a.volume, 6) for a in out]}"
+           f"change or the integral over {angle} needed them); volumes {[round(a.volume, 6) for a in out]}"
            + (f"; {slivers} face(s) of the sections' sliver size seen in one section only "
               "(below the resolution) not counted" if slivers else "")
            + (f"; the curves of {len(early)} section(s) stopped early (stalled, max_steps or "
