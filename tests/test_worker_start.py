@@ -83,6 +83,39 @@ def test_a_ready_worker_starts_its_unit_before_the_next_worker_is_up(monkeypatch
             w.close()
 
 
+def test_an_idle_worker_that_exits_as_it_is_checked_out_is_replaced(monkeypatch):
+    """An idle worker that ends between the checkout's liveness check and the unit sent to
+    it: its reader has already reported the end, to the queue of the run it idled after,
+    and the send fails. The run replaces it at once and finishes (it waited forever
+    before: no event was coming and no deadline was set)."""
+    import threading
+
+    threads = 7  # an environment no other test uses
+    key = wk._env_key(wk._worker_env(threads))
+    try:
+        assert wk.prestart(1, threads=threads) == 1
+        with wk._BOOTED:
+            assert wk._BOOTED.wait_for(lambda: not wk._BOOTING.get(key), 60)
+        (w,) = wk._IDLE[key]
+        w.kill()  # ... and its reader reports the end to the prestart's own queue
+        w.thread.join(10)
+        assert not w.thread.is_alive()
+        monkeypatch.setattr(w.proc, "poll", lambda: None)  # still alive, says the check
+        box: dict = {}
+        t = threading.Thread(target=lambda: box.update(out=wk.run_jobs(
+            [wk.Job("a", _spec("a"))], n_workers=1, threads=threads)), daemon=True)
+        t.start()
+        t.join(60)
+        assert not t.is_alive(), "the run hung on a worker that ended at its checkout"
+        assert [o.kind for o in box["out"]] == ["done"]
+        assert box["out"][0].result["worker"]["pid"] != w.proc.pid
+    finally:
+        with wk._IDLE_LOCK:
+            idle = wk._IDLE.pop(key, [])
+        for x in idle:
+            x.close()
+
+
 def test_workers_do_not_inherit_dasks_malloc_trim(monkeypatch):
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
     for threads in (None, 1):

@@ -596,6 +596,11 @@ def run_jobs(
             for w in workers:
                 if w.job is None and w.ready:
                     assign(w)
+            if any(w.dead for w in workers):
+                # a worker whose pipe broke as a unit was sent to it (it was exiting when
+                # it was checked out): replaced at once, not when its end is reported, which
+                # its reader may have done already, to the queue of the run it idled after
+                continue
             now = time.monotonic()
             deadlines = [w.deadline for w in workers if w.deadline is not None]
             timeout = max(0.0, min(deadlines) - now) if deadlines else None
