@@ -21,6 +21,14 @@ def _spec(name: str) -> dict:
     return {"display": name, "data": path.read_bytes(), "source": str(path), "pictures": False}
 
 
+def _close_idle(key: tuple) -> None:
+    """Close the idle workers a test left for its own environment."""
+    with wk._IDLE_LOCK:
+        idle = wk._IDLE.pop(key, [])
+    for w in idle:
+        w.close()
+
+
 def test_a_run_takes_the_prestarted_worker_even_while_it_starts(monkeypatch):
     threads = 3  # an environment (OMP_NUM_THREADS=3) no other test uses
     key = wk._env_key(wk._worker_env(threads))
@@ -43,10 +51,7 @@ def test_a_run_takes_the_prestarted_worker_even_while_it_starts(monkeypatch):
         assert len(made) == 1 and len(pids) == 1
         assert [w.proc.pid for w in wk._IDLE[key]] == list(pids)
     finally:
-        with wk._IDLE_LOCK:
-            idle = wk._IDLE.pop(key, [])
-        for w in idle:
-            w.close()
+        _close_idle(key)
 
 
 def test_a_ready_worker_starts_its_unit_before_the_next_worker_is_up(monkeypatch):
@@ -77,10 +82,7 @@ def test_a_ready_worker_starts_its_unit_before_the_next_worker_is_up(monkeypatch
         assert sorted(o.kind for o in out) == ["done", "done"]
         assert waited == [True]
     finally:
-        with wk._IDLE_LOCK:
-            idle = wk._IDLE.pop(key, [])
-        for w in idle:
-            w.close()
+        _close_idle(key)
 
 
 def test_an_idle_worker_that_exits_as_it_is_checked_out_is_replaced(monkeypatch):
@@ -110,10 +112,7 @@ def test_an_idle_worker_that_exits_as_it_is_checked_out_is_replaced(monkeypatch)
         assert [o.kind for o in box["out"]] == ["done"]
         assert box["out"][0].result["worker"]["pid"] != w.proc.pid
     finally:
-        with wk._IDLE_LOCK:
-            idle = wk._IDLE.pop(key, [])
-        for x in idle:
-            x.close()
+        _close_idle(key)
 
 
 def test_workers_do_not_inherit_dasks_malloc_trim(monkeypatch):
@@ -180,10 +179,7 @@ def test_a_stopped_idle_worker_is_replaced_within_the_ack_limit(monkeypatch):
         assert second[0].result["worker"]["pid"] != pid
         assert time.perf_counter() - t0 < 2.0 + wk._GRACE + 20.0
     finally:
-        with wk._IDLE_LOCK:
-            idle = wk._IDLE.pop(key, [])
-        for w in idle:
-            w.close()
+        _close_idle(key)
 
 
 def test_dask_preload_hook_starts_one_worker_per_thread(monkeypatch):
