@@ -51,15 +51,15 @@ def _jobs(text: str) -> int | str:
 
 
 #: Memory a worker process is allowed for in ``--jobs auto`` (measured peak of the bundled
-#: problems here: 437 MiB with one worker, 690 MiB with two, parent included)
+#: problems here: 389 MiB with one worker, 676 MiB with two, parent included, 2026-12-06)
 WORKER_MEMORY = 512 * 2**20
 
 
 def auto_jobs(paths: Sequence[str]) -> int:
     """``--jobs auto``: one worker per CPU this process may use, no more than the problem
     files nor than the physical memory holds at :data:`WORKER_MEMORY` each. Measured on the
-    2-core machine: the bundled problems 1.6-1.7x faster with 2 workers than with 1 (50-56 s
-    against 29-34 s, pictures drawn), the same results."""
+    2-core machine: the bundled problems 1.85-1.9x faster with 2 workers than with 1 (13.0-14.5
+    s against 24.6-27.5 s, pictures drawn, 2026-12-06), the same results."""
     try:
         cpus = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):  # not Linux
