@@ -495,8 +495,7 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
         """Pairs (i, j) of faces of the sections at a and b joined by an overlap or by a
         segment in phi from an inner point that stays free (det sign and strokes kept,
         checked at 24 orientations of the gap); and the unmatched faces of each."""
-        wa = ((a + np.pi) % (2 * np.pi)) - np.pi
-        wb = ((b + np.pi) % (2 * np.pi)) - np.pi
+        wa, wb = _wrap(a), _wrap(b)
         fa, fb = faces(wa), faces(wb)
         pairs = set()
         for i, (ma, da, f, _) in enumerate(fa):
@@ -505,7 +504,7 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
                     pairs.add((i, j))
         for src, dst, p0, p1, flip in ((fa, fb, a, b, False), (fb, fa, b, a, True)):
             for i, (m0, d0, _, _) in enumerate(src):
-                P = inner(((p0 + np.pi) % (2 * np.pi)) - np.pi, i)
+                P = inner(_wrap(p0), i)
                 if not len(P):
                     continue
                 ok = free.vertical(P, p0, p1, d0, m0)
@@ -527,9 +526,6 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
     late = False
     arc: dict[tuple[float, int], float] = {}
 
-    def wrap(q: float) -> float:
-        return ((q + np.pi) % (2 * np.pi)) - np.pi
-
     def grouped() -> list[list[tuple[float, int]]]:
         """The faces of every aspect so far, (phi, index) each: faces of neighbouring
         sections joined by the links of their gap."""
@@ -539,7 +535,7 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
                 find.root((p, i))
         for a, b, pairs in done_gaps:
             for i, j in pairs:
-                find.join((wrap(a), i), (wrap(b), j))
+                find.join((_wrap(a), i), (_wrap(b), j))
         groups: dict[Any, list] = {}
         for p in sorted(cache):
             for i in range(len(faces(p))):
@@ -560,11 +556,11 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
             a, b = work.pop()
             if deadline.expired():  # out of time: the sections not yet traced stay untraced
                 late = True
-                if all(wrap(q) in cache for q in (a, b)):
+                if all(_wrap(q) in cache for q in (a, b)):
                     done_gaps.append((a, b, links(a, b)[0]))
                 continue
             pairs, ua, ub = links(a, b)
-            wa, wb = wrap(a), wrap(b)
+            wa, wb = _wrap(a), _wrap(b)
             # a face near the sections' sliver threshold may be kept in one section and
             # dropped in the next: its lack of a partner is no event to locate
             large = any(not sliver(wa, i) for i in ua) or any(not sliver(wb, j) for j in ub)
@@ -595,7 +591,7 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
             break
         keep = []
         for a, b, pairs in done_gaps:
-            if wrap(a) in coarse:
+            if _wrap(a) in coarse:
                 mid = 0.5 * (a + b)
                 work += [(a, mid), (mid, b)]
             else:
@@ -661,6 +657,11 @@ def aspects3d(mech: Mechanism, **options: Any) -> Aspects3D:
                      time.perf_counter() - t0, (model.x_names[0], model.x_names[1], angle))
 
 
+def _wrap(q: float) -> float:
+    """An angle in [-pi, pi) (the key of its section)."""
+    return ((q + np.pi) % (2 * np.pi)) - np.pi
+
+
 def _integrate(phi: np.ndarray, A: np.ndarray) -> float:
     """The integral over the circle of a function sampled at the sorted angles ``phi``
     (an aspect's section areas, 0 where it has none): the trapezoid rule less, on each
@@ -668,18 +669,27 @@ def _integrate(phi: np.ndarray, A: np.ndarray) -> float:
     differences at its two ends, where the function is present at the three points each
     needs). Areas are smooth between the sections the refinement put around births,
     deaths, splits and merges; there the intervals are short and the correction small."""
+    h, F, D = _second_differences(phi, A)
+    trap = float(np.sum(0.5 * h * (F[1:-1] + F[2:])))
+    mid = 0.5 * (D[:-1] + D[1:])  # on the interval from phi[k] to phi[k + 1]
+    corr = np.where(np.isfinite(mid), h ** 3 / 12.0 * mid, 0.0)
+    return trap - float(np.sum(corr))
+
+
+def _second_differences(phi: np.ndarray, A: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For samples ``A`` at the sorted angles ``phi`` round the circle: the width of each
+    interval from ``phi[k]`` to the next (n), the samples padded periodically at both ends
+    (n + 2: ``F[k + 1]`` is ``A[k]``), and the second divided difference at each sample,
+    repeated at the end (n + 1: ``D[k]`` at ``phi[k]``), NaN where the function is not
+    present (> 0) at all three points it needs."""
     n = len(phi)
     P = np.r_[phi[-1] - 2 * np.pi, phi, phi[0] + 2 * np.pi]
     F = np.r_[A[-1], A, A[0]]
     h = np.diff(P)  # h[k]: from P[k] to P[k + 1]
-    trap = float(np.sum(0.5 * h[1:n + 1] * (F[1:n + 1] + F[2:n + 2])))
-    # second divided differences at the samples (P[1..n]), NaN where not all present
     d2 = 2 * ((F[2:] - F[1:-1]) / h[1:] - (F[1:-1] - F[:-2]) / h[:-1]) / (h[1:] + h[:-1])
     d2[(F[:-2] <= 0) | (F[1:-1] <= 0) | (F[2:] <= 0)] = np.nan
-    D = np.r_[d2, d2[0]]  # D[k]: at phi[k] (periodic)
-    mid = 0.5 * (D[:-1] + D[1:])  # on the interval from phi[k] to phi[k + 1]
-    corr = np.where(np.isfinite(mid), h[1:n + 1] ** 3 / 12.0 * mid, 0.0)
-    return trap - float(np.sum(corr))
+    return h[1:n + 1], F, np.r_[d2, d2[0]]
 
 
 def _interval_errors(phi: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, float]:
@@ -690,14 +700,7 @@ def _interval_errors(phi: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, float]
     them makes it large); where only one has it the interval is integrated by the plain
     trapezoid, whose error is about h^3 / 12 times that one; where neither has (a face born
     or dying: the events' own refinement) it is not estimated."""
-    n = len(phi)
-    P = np.r_[phi[-1] - 2 * np.pi, phi, phi[0] + 2 * np.pi]
-    F = np.r_[A[-1], A, A[0]]
-    h = np.diff(P)
-    d2 = 2 * ((F[2:] - F[1:-1]) / h[1:] - (F[1:-1] - F[:-2]) / h[:-1]) / (h[1:] + h[:-1])
-    d2[(F[:-2] <= 0) | (F[1:-1] <= 0) | (F[2:] <= 0)] = np.nan
-    D = np.r_[d2, d2[0]]
-    hk = h[1:n + 1]
+    hk, _, D = _second_differences(phi, A)
     lo, hi = D[:-1], D[1:]
     both = np.isfinite(lo) & np.isfinite(hi)
     one = np.where(np.isfinite(lo), lo, np.where(np.isfinite(hi), hi, 0.0))
@@ -721,7 +724,7 @@ def _count_modes(mech, free: _FreeTest, out, order) -> None:
         for s in sols:
             if free.label(np.r_[qa, s.x]) != (tuple(a.working_mode), a.det_sign):
                 continue
-            phi = float(((s.x[2] + np.pi) % (2 * np.pi)) - np.pi)
+            phi = float(_wrap(s.x[2]))
             p = order[int(np.argmin(np.abs(np.angle(np.exp(1j * (order - phi))))))]
             inside = [f for q, f in a.sections if q == p]
             if any(bool(point_in_face(f, s.x[None, :2])[0]) for f in inside):
