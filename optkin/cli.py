@@ -119,6 +119,12 @@ def build_parser() -> argparse.ArgumentParser:
     j.add_argument("--out", "-o", metavar="FILE", default=None,
                    help="write it to FILE instead of standard output")
 
+    w = sub.add_parser("workers", help="start, stop or query this user's worker server "
+                       "(runs then take workers forked ready instead of starting their own)")
+    w.add_argument("action", choices=("start", "stop", "status"))
+    w.add_argument("--idle", type=float, default=None, metavar="MINUTES",
+                   help="start: exit after MINUTES without a request (default 30)")
+
     s = sub.add_parser("show", help="draw a problem's mechanism at its first solved configuration")
     s.add_argument("file", metavar="FILE", help="a problem file")
     s.add_argument("--out", "-o", metavar="PNG", default=None,
@@ -327,6 +333,41 @@ _INTERRUPTED = False
 _INTERRUPTED_RUN = "optkin: interrupted; completed results are kept, rerun to resume"
 
 
+def _cmd_workers(args: argparse.Namespace) -> int:
+    from optkin.problems import server
+
+    try:
+        if args.action == "start":
+            idle = server.IDLE_MINUTES if args.idle is None else args.idle
+            if not 0 < idle <= 7 * 24 * 60:
+                _err(f"optkin workers: --idle must be in (0, {7 * 24 * 60}] minutes, got "
+                     f"{idle:g}")
+                return EXIT_INVALID
+            info = server.start(idle)
+            state = "started" if info.get("started_now") else "already running"
+            print(f"optkin workers: {state} (pid {info['pid']}, {info['socket']}); it exits "
+                  f"after {info['idle_seconds'] / 60:g} min without a run, or with "
+                  "'optkin workers stop'")
+            return 0
+        if args.action == "stop":
+            stopped = server.stop()
+            print("optkin workers: stopped" if stopped else
+                  "optkin workers: none running for this environment")
+            return 0
+        info = server.status()
+        if info is None:
+            print("optkin workers: none running for this environment (runs start their own "
+                  "workers; 'optkin workers start' starts a server)")
+            return 1
+        print(f"optkin workers: running (pid {info['pid']}, {info['socket']}); "
+              f"{info['forked']} worker(s) forked, idle for {info['idle_for']:.0f} s of "
+              f"{info['idle_seconds']:.0f}")
+        return 0
+    except server.ServerError as e:
+        _err(f"optkin workers: {e}")
+        return EXIT_INVALID
+
+
 def _on_sigint(signum: int, frame: Any) -> None:
     global _INTERRUPTED
     _INTERRUPTED = True
@@ -370,6 +411,8 @@ def _main(argv: Sequence[str] | None) -> int:
             return _cmd_show(args)
         if args.command == "schema":
             return _cmd_schema(args)
+        if args.command == "workers":
+            return _cmd_workers(args)
     except ProblemFileError as e:
         _err(str(e))
         return EXIT_INVALID

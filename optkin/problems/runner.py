@@ -839,15 +839,18 @@ def _units(todo: list[tuple[ProblemFileInfo, bytes]], pictures: bool, split: boo
         try:
             doc = parse_toml(data, info.display)
             costs, group = task_costs(doc), topology_group(doc)
+            tasks = doc.get("task") if isinstance(doc.get("task"), list) else []
+            kinds = [str(t.get("kind")) if isinstance(t, dict) else "?" for t in tasks]
         except Exception:  # noqa: BLE001 - the worker reports what is wrong with the file
-            costs, group = [1.0], "?"
+            costs, group, kinds = [1.0], "?", []
         if split and len(costs) > 1:
             units += [(n, Job(f"{info.display}#{i}", dict(spec, only=[i]),
-                              cost=PROBLEM_COST + c, group=group))
+                              cost=PROBLEM_COST + c, group=group,
+                              kinds=tuple(kinds[i:i + 1])))
                       for i, c in enumerate(costs)]
         else:
             units.append((n, Job(info.display, spec, cost=PROBLEM_COST + sum(costs),
-                                 group=group)))
+                                 group=group, kinds=tuple(kinds))))
     units.sort(key=lambda u: (-u[1].cost, u[0]))
     return [job for _, job in units]
 

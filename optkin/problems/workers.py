@@ -131,10 +131,13 @@ def _preload() -> None:
             pass
 
 
-def serve(rfd: int, wfd: int, parent: int) -> None:
-    """Worker main loop: read jobs from ``rfd``, report on ``wfd`` until told to exit."""
+def serve(rfd: int, wfd: int, parent: int | None) -> None:
+    """Worker main loop: read jobs from ``rfd``, report on ``wfd`` until told to exit.
+    ``parent``: the pid of the run that started this process (None when forked by the
+    worker server, :mod:`optkin.problems.server`, which watches the run's pipe instead)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
-    _die_with_parent(parent)
+    if parent is not None:
+        _die_with_parent(parent)
     import optkin
     from optkin.problems import runner
 
@@ -212,6 +215,8 @@ class Job:
     group: str = ""
     pictures: dict[str, bytes] = field(default_factory=dict)
     setup_deaths: int = 0
+    #: the kinds of its tasks (which a worker server warms up with, :func:`_warm_server`)
+    kinds: tuple[str, ...] = ()
 
 
 @dataclass
@@ -262,11 +267,19 @@ class _Worker:
         c2p_r, c2p_w = os.pipe()
         self.stderr = tempfile.TemporaryFile()
         try:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-S", "-c", _BOOT, root, str(p2c_r), str(c2p_w),
-                 str(os.getpid()), *_boot_path()],
-                pass_fds=(p2c_r, c2p_w), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                stderr=self.stderr, env=env, start_new_session=True)
+            from optkin.problems.server import fork_worker
+
+            # forked ready by this user's worker server when one runs for this
+            # environment, else a new process that imports everything itself
+            self.proc: Any = fork_worker(env, p2c_r, c2p_w, self.stderr.fileno())
+            self.forked = self.proc is not None
+            if self.proc is None:
+                self.proc = subprocess.Popen(
+                    [sys.executable, "-S", "-c", _BOOT, root, str(p2c_r), str(c2p_w),
+                     str(os.getpid()), *_boot_path()],
+                    pass_fds=(p2c_r, c2p_w), stdin=subprocess.DEVNULL,
+                    stdout=subprocess.DEVNULL, stderr=self.stderr, env=env,
+                    start_new_session=True)
         finally:
             os.close(p2c_r)
             os.close(c2p_w)
@@ -531,6 +544,7 @@ def run_jobs(
     events: queue.Queue = queue.Queue()
     workers: list[_Worker] = []
     n_workers = max(1, min(n_workers, len(pending)))
+    served = False  # a worker came from a worker server
 
     def finish(o: JobOutcome) -> None:
         outcomes.append(o)
@@ -678,5 +692,31 @@ def run_jobs(
             if w.job is not None:
                 w.kill()
                 w.dead = True
+            served = served or getattr(w, "forked", False)
             _checkin(w, env, n_workers if keep is None else keep)
+    if served:
+        _warm_server(env, pending.jobs)
     return outcomes
+
+
+def _warm_server(env: dict[str, str], jobs: list[Job]) -> None:
+    """Tell the worker server that forked this run's workers what the run did: of each
+    kind of work (topology, task kinds, pictures or not), the unit estimated cheapest,
+    if it is cheap (:data:`optkin.problems.server.WARM_MAX_COST`). The server runs these
+    once in a copy of itself that then forks the next run's workers with their models
+    and modules loaded (:mod:`optkin.problems.server`)."""
+    from optkin.problems import server
+
+    best: dict[str, Job] = {}
+    for j in jobs:
+        if j.spec.get("validate") or j.cost > server.WARM_MAX_COST \
+                or len(j.spec.get("data", b"")) > 1 << 18:
+            continue
+        label = f"{j.group}|{','.join(sorted(set(j.kinds)))}|{bool(j.spec.get('pictures'))}"
+        if label not in best or j.cost < best[label].cost:
+            best[label] = j
+    if best:
+        server.warm(env, [{"label": label, "display": j.spec["display"],
+                           "source": j.spec.get("source", ""), "data": j.spec["data"],
+                           "pictures": bool(j.spec.get("pictures")),
+                           "only": j.spec.get("only")} for label, j in best.items()])
