@@ -17,11 +17,16 @@ For each worker count P up to the machine's cores, ``optkin run --no-pictures -q
 runs the batch in a fresh process, and so does the same batch sent to a Dask
 ``LocalCluster(P workers, 1 thread each)`` with ``--scheduler``, twice: at once after the
 cluster starts (its workers and the optkin processes their preload starts still importing
-on the cores the run uses) and **settled** (``_settled``: once those say ready, as on a
-long-lived cluster that outlives runs); each **cold** (its own
+on the cores the run uses), **settled** (``_settled``: once those say ready, as on a
+long-lived cluster that outlives runs) and, warm, **primed** (``_primed``: settled and after
+a first run of the batch, whose optkin worker processes the cluster keeps: a long-lived
+cluster after a user's first run); each **cold** (its own
 empty compiled-code cache: every topology's code is compiled during the run, once per
 cache) and **warm** (a cache filled by an earlier run, the state of every run after a
-user's first). ``extra_info`` holds the wall times, the speed-ups over ``--jobs 1`` in the
+user's first), and the pool once more with its workers forked by a **worker server**
+(``optkin workers start``, warmed up by one run of the batch and one of the trivial
+problem before its runs are measured: every run after a user's first with a server).
+``extra_info`` holds the wall times, the speed-ups over ``--jobs 1`` in the
 same state (the in-run baseline), the efficiencies, whether the results equal those of
 the first run, and the predictions of :func:`predict`, a model fed with what the runs
 measured:
@@ -52,6 +57,11 @@ measured:
   already in the fixed cost, over the other units): the parent handles the results one
   after the other, so no schedule beats ``n`` times it;
 
+and, with the worker server, the same unit costs (those measured without it, so that the
+problems its warm-up ran save nothing) with its own fixed cost (``fixed_server``), set-ups
+(measured the same way in workers it forks: ``warmup_per_topology_server``) and overhead
+per unit;
+
 and predicts the makespan at P workers by simulating the runner's own scheduling policy
 (:class:`optkin.problems.costs.Affinity`) event by event, plus the fixed cost, or the
 parent's serial share when longer. The same model predicts the ``--jobs 2`` runs measured
@@ -70,8 +80,10 @@ from __future__ import annotations
 import heapq
 import json
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -159,12 +171,34 @@ _CLI = ("import sys, time\nfrom optkin.cli import main\n"
         "print(f'parent-cpu {time.process_time():.6f}', file=sys.stderr)\nfast_exit(rc)\n")
 
 
+#: This process's environment before any Dask ``LocalCluster``: one sets, in the process
+#: that starts it, and leaves behind ``PYTHONHASHSEED``, one BLAS thread
+#: (``OMP_NUM_THREADS`` and kin), ``MALLOC_TRIM_THRESHOLD_`` and ``__DASK_PARENT_PID``,
+#: which would otherwise reach every run after the first cluster (a ``--jobs 1`` run's
+#: BLAS threads among them)
+_BASE_ENV = dict(os.environ)
+
+
+def _env(cache: Path, runtime: Path | None = None) -> dict[str, str]:
+    """The environment of a run: its compiled-code cache; with ``runtime`` the worker
+    server of that runtime directory (:func:`start_server`), else none (not even the
+    user's: ``OPTKIN_WORKER_SERVER=0``)."""
+    env = dict(_BASE_ENV, OPTKIN_CACHE=str(cache))
+    if runtime is None:
+        env["OPTKIN_WORKER_SERVER"] = "0"
+    else:
+        env.pop("OPTKIN_WORKER_SERVER", None)
+        env["XDG_RUNTIME_DIR"] = str(runtime)
+    return env
+
+
 def run_batch(batch: Path, out: Path, cache: Path, jobs: int = 1,
-              scheduler: str | None = None) -> tuple[float, float]:
+              scheduler: str | None = None, runtime: Path | None = None
+              ) -> tuple[float, float]:
     """Wall time of ``optkin run`` on ``batch`` in a fresh process (its own cache), and the
-    CPU time of that command-line process alone (not its workers)."""
-    env = dict(os.environ, OPTKIN_CACHE=str(cache))
-    env.pop("MALLOC_TRIM_THRESHOLD_", None)  # set in this process by a Dask LocalCluster
+    CPU time of that command-line process alone (not its workers); with ``runtime``, its
+    workers forked by the worker server there."""
+    env = _env(cache, runtime)
     cmd = [sys.executable, "-c", _CLI, "run", str(batch), "--out", str(out),
            "--no-pictures", "-q", "--force"]
     cmd += ["--scheduler", scheduler] if scheduler else ["--jobs", str(jobs)]
@@ -264,7 +298,8 @@ print(json.dumps(out))
 """
 
 
-def setups(units, batch: Path, cache: Path, reps: int = 3) -> dict[str, float]:
+def setups(units, batch: Path, cache: Path, reps: int = 3,
+           runtime: Path | None = None) -> dict[str, float]:
     """The set-up of each topology in a worker: in a fresh process that has imported what
     a worker imports before it says ready, the first two units A and B of each topology
     (in the runner's order) run one after the other, and in another such process B then
@@ -276,11 +311,11 @@ def setups(units, batch: Path, cache: Path, reps: int = 3) -> dict[str, float]:
     for prob, topo, _, _ in units:
         if len(two.setdefault(topo, [])) < 2:
             two[topo].append(str(batch / prob))
-    env = dict(os.environ, OPTKIN_CACHE=str(cache))
-    env.pop("MALLOC_TRIM_THRESHOLD_", None)
+    env = _env(cache, runtime)
+    code = _SETUP if runtime is None else _SETUP_SERVED
 
     def run(order: list) -> dict:
-        p = subprocess.run([sys.executable, "-c", _SETUP, json.dumps(order)], env=env,
+        p = subprocess.run([sys.executable, "-c", code, json.dumps(order)], env=env,
                            capture_output=True, text=True, timeout=600, check=True)
         return json.loads(p.stdout.splitlines()[-1])
 
@@ -295,6 +330,51 @@ def setups(units, batch: Path, cache: Path, reps: int = 3) -> dict[str, float]:
             b2, a2 = ba[t]
             est[t].append(max(0.0, 0.5 * ((a1 - a2) + (b2 - b1))))
     return {t: float(np.median(v)) if v else 0.0 for t, v in est.items()}
+
+
+def workers_cmd(action: str, cache: Path, runtime: Path) -> str:
+    """``optkin workers ACTION`` as the runs see it (the same interpreter, module path and
+    environment, so the same server); its output."""
+    p = subprocess.run([sys.executable, "-c", _CLI, "workers", action],
+                       env=_env(cache, runtime), capture_output=True, text=True, timeout=180)
+    return p.stdout + p.stderr
+
+
+def _server_pid(cache: Path, runtime: Path) -> int | None:
+    out = workers_cmd("status", cache, runtime)
+    return int(out.split("(pid ")[1].split(",")[0]) if "(pid " in out else None
+
+
+def start_server(batch: Path, cache: Path, runtime: Path, tmp: Path) -> int:
+    """Start a worker server for the runs and let it warm up as a user's would: one run of
+    ``batch`` through it (after which a copy of it that ran one unit of each kind takes
+    over); its pid once that copy serves."""
+    out = workers_cmd("start", cache, runtime)
+    first = _server_pid(cache, runtime)
+    if first is None:
+        raise RuntimeError(f"optkin workers start: {out}")
+    run_batch(batch, tmp, cache, runtime=runtime)
+    end = time.monotonic() + 120
+    while time.monotonic() < end:
+        pid = _server_pid(cache, runtime)
+        if pid is not None and pid != first:
+            return pid
+        time.sleep(0.2)
+    raise RuntimeError("the worker server did not warm up within 120 s")
+
+
+_SETUP_SERVED = """
+import json, sys
+from optkin.problems.workers import Job, run_jobs
+out = {}
+for topo, files in json.loads(sys.argv[1]):
+    out[topo] = []
+    for f in files:  # one worker (kept idle between the calls), forked by the server
+        spec = {"display": f, "data": open(f, "rb").read(), "source": f, "pictures": False}
+        (o,) = run_jobs([Job(f, spec)], n_workers=1, threads=1)
+        out[topo].append(o.result["elapsed"])
+print(json.dumps(out))
+"""
 
 
 def unit_net_costs(units, setup: dict[str, float]) -> list[float]:
@@ -420,6 +500,10 @@ def test_scaling(benchmark, tmp_path):
     filled = tmp_path / "cache_filled"  # the warm runs' cache: filled by a first run
     run_batch(batch, tmp_path / "fill", filled)
     _wait_builds(filled)  # and by the builds it started (detached, they outlive the run)
+    # a worker server for the "server" runs, in a runtime directory of its own (short: a
+    # socket path has at most 107 bytes), warmed up by one run of the batch
+    runtime = Path(tempfile.mkdtemp(prefix="okb"))
+    start_server(batch, filled, runtime, tmp_path / "prime")
 
     def measure():
         walls: dict[str, list[float]] = {}
@@ -429,12 +513,13 @@ def test_scaling(benchmark, tmp_path):
         parent_cpu: dict[str, list[float]] = {}
         sums: dict[str, list[float]] = {}
         for r in range(ROUNDS):  # interleaved, so that a slow spell of the machine hits all
-            for state in ("cold", "warm"):
+            for state in ("cold", "warm", "server"):
                 for P in counts:
                     key = f"pool{P}_{state}"
                     out = tmp_path / f"{key}_{r}"
-                    cache = filled if state == "warm" else tmp_path / f"cache_{key}_{r}"
-                    wall, cpu = run_batch(batch, out, cache, jobs=P)
+                    cache = filled if state != "cold" else tmp_path / f"cache_{key}_{r}"
+                    wall, cpu = run_batch(batch, out, cache, jobs=P,
+                                          runtime=runtime if state == "server" else None)
                     _wait_builds(cache)  # a cold run's builders must not load the next run
                     walls.setdefault(key, []).append(wall)
                     u = unit_costs(out, batch)
@@ -445,14 +530,19 @@ def test_scaling(benchmark, tmp_path):
                     if ref is None:
                         ref = results_of(out)
                     same[key] = same.get(key, True) and results_of(out) == ref
-                for P, settle in [(P, s) for P in counts for s in (False, True)
-                                  if have_dask]:
-                    key = f"dask{P}_{state}" + ("_settled" if settle else "")
+                # a cluster at once, settled, and (warm) primed: after a first run
+                modes = ("", "_settled", "_primed") if state == "warm" else ("", "_settled")
+                for P, mode in [(P, m) for P in counts for m in modes
+                                if have_dask and state != "server"]:
+                    key = f"dask{P}_{state}{mode}"
                     out = tmp_path / f"{key}_{r}"
                     cache = filled if state == "warm" else tmp_path / f"cache_{key}_{r}"
                     with _local_cluster(P, cache) as cluster:
-                        if settle:
+                        if mode:
                             _settle(cluster)
+                        if mode == "_primed":
+                            run_batch(batch, tmp_path / f"{key}_prime_{r}", cache,
+                                      scheduler=cluster.scheduler_address)
                         wall, _ = run_batch(batch, out, cache,
                                             scheduler=cluster.scheduler_address)
                     _wait_builds(cache)
@@ -461,16 +551,37 @@ def test_scaling(benchmark, tmp_path):
         # the fixed cost: a run of one trivial problem, less that problem's own time
         triv = tmp_path / "triv"
         make_trivial(triv, 1)
-        fixed, triv_cpu = [], []
+        fixed: dict[str, list[float]] = {"warm": [], "server": []}
+        triv_cpu = []
+        # the server warms up with the trivial problem too (a new kind of work) before
+        # its runs are measured, as it would have after a user's first such run
+        first = _server_pid(filled, runtime)
+        run_batch(triv, tmp_path / "triv_prime", filled, runtime=runtime)
+        end = time.monotonic() + 60
+        while _server_pid(filled, runtime) == first and time.monotonic() < end:
+            time.sleep(0.2)
         for k in range(FIXED_RUNS):
-            t_one, c_one = run_batch(triv, tmp_path / f"triv_out{k}", filled)
-            fixed.append(max(0.0, t_one - sum(c for _, _, c, _ in
-                                              unit_costs(tmp_path / f"triv_out{k}", triv))))
-            triv_cpu.append(c_one)
+            for state in ("warm", "server"):
+                out = tmp_path / f"triv_{state}{k}"
+                t_one, c_one = run_batch(triv, out, filled,
+                                         runtime=runtime if state == "server" else None)
+                fixed[state].append(max(0.0, t_one - sum(c for _, _, c, _ in
+                                                         unit_costs(out, triv))))
+                if state == "warm":
+                    triv_cpu.append(c_one)
         return (walls, same, units, parent_cpu, fixed, sums, float(np.median(triv_cpu)))
 
-    walls, same, units, parent_cpu, fixed_samples, sums, triv_cpu = benchmark.pedantic(
-        measure, rounds=1, iterations=1)
+    try:
+        walls, same, units, parent_cpu, fixed_samples, sums, triv_cpu = benchmark.pedantic(
+            measure, rounds=1, iterations=1)
+        # the set-up of each topology in a worker forked by the (warmed) server
+        # (the first round's units: only their order matters here, the same in every run)
+        excess_server = setups(units["warm"][0], batch, filled, runtime=runtime)
+    finally:
+        workers_cmd("stop", filled, runtime)
+        shutil.rmtree(runtime, ignore_errors=True)
+    fixed_server = float(np.median(fixed_samples["server"]))
+    fixed_samples = fixed_samples["warm"]
     fixed = float(np.median(fixed_samples))
     # each unit's median over the rounds (the order is the same in every run)
     units = {st: [(*rows[0][i][:2], float(np.median([r[i][2] for r in rows])), rows[0][i][3])
@@ -479,7 +590,7 @@ def test_scaling(benchmark, tmp_path):
     med = {k: float(np.median(v)) for k, v in walls.items()}
     info = {"n_problems": N_PROBLEMS, "cores": cores, "rounds": ROUNDS, "walls": walls,
             "wall_median": med, "same_results": same, "fixed": fixed,
-            "fixed_samples": fixed_samples}
+            "fixed_samples": fixed_samples, "fixed_server": fixed_server}
     # the model, fed with the first one-worker runs: warm for the steady state, cold for
     # the compile of each topology (its first unit's excess over the warm run's)
     excess = setups(units["warm"], batch, filled)
@@ -522,6 +633,21 @@ def test_scaling(benchmark, tmp_path):
             info[f"predicted_efficiency_192_at_{P}_{state}_inflated"] = predict(
                 **model, workers=P, n=192, compile_=comp,
                 inflation=inflation.get(state, 1.0))["efficiency"]
+    # with the worker server (warmed by the runs before, as after a user's first): the
+    # same unit costs (those of the runs without it, so that the problems its warm-up ran
+    # save nothing here), its own fixed cost, set-ups and overhead per unit
+    per_unit_server = max(0.0, (med["pool1_server"] - fixed_server
+                                - sum(excess_server.values()) - sum(costs)) / n)
+    served = dict(model, fixed=fixed_server, per_unit=per_unit_server, warm=excess_server)
+    info.update({"warmup_per_topology_server": excess_server,
+                 "per_unit_server": per_unit_server})
+    pr = predict(**served, workers=2, n=n, inflation=inflation.get("warm", 1.0))
+    info["predicted_speedup_pool2_server"] = pr["t1"] / pr["tp"]
+    for P in (16, 64):
+        info[f"predicted_efficiency_192_at_{P}_server"] = predict(
+            **served, workers=P, n=192)["efficiency"]
+        info[f"predicted_efficiency_192_at_{P}_server_inflated"] = predict(
+            **served, workers=P, n=192, inflation=inflation.get("warm", 1.0))["efficiency"]
     benchmark.extra_info.update(info)
     print(json.dumps(info, indent=1))
     assert all(same.values()), same

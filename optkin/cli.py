@@ -359,9 +359,11 @@ def _cmd_workers(args: argparse.Namespace) -> int:
             print("optkin workers: none running for this environment (runs start their own "
                   "workers; 'optkin workers start' starts a server)")
             return 1
+        warm = (f"warmed up with {len(info['warmed'])} kind(s) of work"
+                + (", warming up" if info.get("warming") else ""))
         print(f"optkin workers: running (pid {info['pid']}, {info['socket']}); "
-              f"{info['forked']} worker(s) forked, idle for {info['idle_for']:.0f} s of "
-              f"{info['idle_seconds']:.0f}")
+              f"{info['forked']} worker(s) forked, {warm}; idle for {info['idle_for']:.0f} "
+              f"s of {info['idle_seconds']:.0f}")
         return 0
     except server.ServerError as e:
         _err(f"optkin workers: {e}")

@@ -475,6 +475,7 @@ class _Server:
         self.failed: set[str] = set()
         self.warmer: dict[str, Any] | None = None
         self.want_warm = False
+        self.handed: set[str] = set()
         self.listener, self.ino = self._listen()
 
     def _listen(self) -> tuple[socket.socket, int]:
@@ -651,6 +652,7 @@ class _Server:
             return False
         self._publish(w["pid"])
         os.write(w["go"], b"g")
+        self.handed = set(w["labels"])
         for fd in (w["ready"], w["go"]):
             os.close(fd)
         self.warmer = None  # (not to be killed on the way out: it serves now)
@@ -673,6 +675,31 @@ class _Server:
 
     # -- the loop ----------------------------------------------------------------------
 
+    def _forward(self) -> None:
+        """Pass to the warmed copy the units asked for since it was forked."""
+        units = [{"label": label, "display": u["display"], "source": u["source"],
+                  "data": u["data"], "pictures": u["pictures"], "only": u["only"]}
+                 for label, u in self.specs.items() if label not in self.handed]
+        if units:
+            with contextlib.suppress(OSError, ServerError, EOFError, ValueError):
+                _request(self.path, {"op": "warm", "units": [
+                    dict(u, data=base64.b64encode(u["data"]).decode()) for u in units]})
+
+    def _drain(self) -> None:
+        """Answer the connections already queued here: since the path names the warmed
+        copy's socket, no new one comes, and those would otherwise be reset."""
+        self.listener.setblocking(False)
+        while True:
+            try:
+                conn, _ = self.listener.accept()
+            except OSError:  # none left (BlockingIOError)
+                return
+            with conn:
+                with contextlib.suppress(_Stop, OSError, EOFError, ValueError, KeyError,
+                                         TypeError):
+                    conn.setblocking(True)
+                    self.handle(conn)
+
     def loop(self) -> None:
         """Serve until idle, stopped, replaced, or out of date."""
         try:
@@ -688,6 +715,8 @@ class _Server:
                 watch = [self.listener] + ([self.warmer["ready"]] if self.warmer else [])
                 r, _, _ = select.select(watch, [], [], 0.5 if self.warmer else 1.0)
                 if self.warmer is not None and self._check_warmer(self.warmer["ready"] in r):
+                    self._drain()
+                    self._forward()
                     return
                 if self.listener not in r:
                     continue
