@@ -299,7 +299,14 @@ def fork_worker(env: dict[str, str], rfd: int, wfd: int, errfd: int) -> Forked |
 
 
 def status(env: dict[str, str] | None = None) -> dict[str, Any] | None:
-    """What the server for this environment says of itself, or None when none answers."""
+    """What the worker server for this environment says of itself, or None when none
+    answers (``optkin workers status``).
+
+    ``env`` is the environment of the runs it would serve (default: this process's).
+    The answer holds ``pid``, ``socket``, ``forked`` (workers forked so far), ``warmed``
+    (the kinds of work its workers start warm for, ``topology|task kinds|pictures``),
+    ``warming`` (a warm-up in progress), ``idle_for`` and ``idle_seconds``.
+    """
     try:
         path = socket_path(env)
         if not path.exists():
@@ -311,7 +318,9 @@ def status(env: dict[str, str] | None = None) -> dict[str, Any] | None:
 
 
 def stop(env: dict[str, str] | None = None) -> bool:
-    """Stop the server for this environment; whether one was running."""
+    """Stop the worker server for this environment (``optkin workers stop``); whether
+    one was running. Workers it forked for runs still going on are not touched: they
+    belong to their runs."""
     try:
         path = socket_path(env)
         _request(path, {"op": "stop"})
@@ -350,9 +359,18 @@ _SERVER_BOOT = (
 )
 
 
-def start(idle_minutes: float = IDLE_MINUTES, env: dict[str, str] | None = None) -> dict[str, Any]:
-    """Start the server for this environment (or find it running); what it says of
-    itself. ``ServerError`` when it cannot (the reason and what to do)."""
+def start(idle_minutes: float = IDLE_MINUTES,
+          env: dict[str, str] | None = None) -> dict[str, Any]:
+    """Start the worker server for this environment, or find it running (``optkin
+    workers start``); what it says of itself (:func:`status`, with ``started_now``).
+
+    The server is a process of its own (it outlives the caller), which exits after
+    ``idle_minutes`` without a request, at :func:`stop`, or at its first request once
+    optkin's files or the module path's directories have changed. ``env``: the
+    environment of the runs to serve (default: this process's). Raises
+    :class:`ServerError`, with the reason and what to do, when it cannot start (not
+    Linux, an unsafe runtime directory, a server that does not come up: its log is
+    named)."""
     if not supported():
         raise ServerError("the worker server needs Linux (fork, pidfd); runs start their "
                           "own workers here")
