@@ -124,6 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("action", choices=("start", "stop", "status"))
     w.add_argument("--idle", type=float, default=None, metavar="MINUTES",
                    help="start: exit after MINUTES without a request (default 30)")
+    w.add_argument("--all", action="store_true",
+                   help="stop: every server of this user (other environments, earlier "
+                        "optkin files), not only this environment's")
 
     s = sub.add_parser("show", help="draw a problem's mechanism at its first solved configuration")
     s.add_argument("file", metavar="FILE", help="a problem file")
@@ -348,6 +351,9 @@ def _cmd_workers(args: argparse.Namespace) -> int:
             print(f"optkin workers: {state} (pid {info['pid']}, {info['socket']}); it exits "
                   f"after {info['idle_seconds'] / 60:g} min without a run, or with "
                   "'optkin workers stop'")
+            return 0
+        if args.action == "stop" and args.all:
+            print(f"optkin workers: stopped {server.stop_all()} server(s)")
             return 0
         if args.action == "stop":
             stopped = server.stop()

@@ -291,6 +291,18 @@ def test_the_workers_command(runtime):
     assert r.returncode == 0 and "running (pid" in r.stdout
     r = optkin("workers", "stop")
     assert r.returncode == 0 and "stopped" in r.stdout
+    # a server of another environment (other import-time variables), and --all
+    other = dict(os.environ, OPTKIN_SOMETHING="1")
+    r = subprocess.run([sys.executable, "-m", "optkin", "workers", "start"],
+                       capture_output=True, text=True, timeout=120, env=other)
+    assert r.returncode == 0, r.stderr
+    pid = int(r.stdout.split("(pid ")[1].split(",")[0])
+    r = optkin("workers", "stop")
+    assert r.returncode == 0 and "none running" in r.stdout  # not this environment's
+    assert _alive(pid)
+    r = optkin("workers", "stop", "--all")
+    assert r.returncode == 0 and "stopped 1 server(s)" in r.stdout
+    assert _wait_gone(pid, 10) and not list((runtime / "optkin").glob("*.sock"))
     r = optkin("workers", "start", "--idle", "-1")
     assert r.returncode == 2 and "--idle must be in" in r.stderr
 
@@ -354,3 +366,42 @@ def test_a_warm_up_that_dies_leaves_the_server_serving(server):
     (o,) = wk.run_jobs([wk.Job("b", _spec("b.toml"))], threads=1)
     assert o.kind == "done"
     assert sv.status()["forked"] == 2  # still forking, from the plain server
+
+
+_LEAVES_THREAD = r"""
+import os, sys
+from optkin.problems.runner import worker_job
+f = sys.argv[1]
+n = len(os.listdir("/proc/self/task"))
+worker_job("w", {"display": "s", "data": open(f, "rb").read(), "source": f,
+                 "pictures": False}, lambda m: None)
+print(len(os.listdir("/proc/self/task")) - n)
+"""
+
+
+def test_a_unit_that_leaves_a_thread_running_is_not_warmed_and_the_rest_is(server):
+    """Forking a process with other threads is unsafe (the child has only the forking
+    thread; a pool waiting on the others would hang). A unit whose solver leaves a thread
+    behind (here cvxpy's, on the statics of a 3-RPR) is named by the warm-up, which
+    starts again without it."""
+    statics = PROBLEMS / "statics_rpr3.toml"
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    left = subprocess.run([sys.executable, "-c", _LEAVES_THREAD, str(statics)], env=env,
+                          capture_output=True, text=True, timeout=300)
+    if left.stdout.strip() in ("", "0"):
+        pytest.skip("this installation's statics solver leaves no thread behind")
+    jobs = [wk.Job("s", _spec("s", "statics_rpr3.toml"), group="rpr3", kinds=("statics",)),
+            wk.Job("a", _spec("a"), group="four_bar", kinds=("forward",))]
+    assert [o.kind for o in wk.run_jobs(jobs, threads=1)] == ["done", "done"]
+    _drop_idle()
+    info = _served_by_a_new_server(server["pid"], limit=120)
+    assert info["warmed"] == ["four_bar|forward|False"]
+    log = Path(info["socket"]).with_suffix(".log").read_text()
+    assert "rpr3|statics|False: leaves 1 thread(s) running; not warmed" in log
+    assert _threads(info["pid"]) == 1
+    (o,) = wk.run_jobs([wk.Job("b", _spec("b"))], threads=1)
+    assert o.kind == "done"
+
+
+def _threads(pid: int) -> int:
+    return len(os.listdir(f"/proc/{pid}/task"))

@@ -53,7 +53,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["IDLE_MINUTES", "ServerError", "runtime_dir", "socket_path", "start", "status",
-           "stop", "fork_worker"]
+           "stop", "stop_all", "fork_worker"]
 
 #: Minutes a server stays without a request before it exits.
 IDLE_MINUTES = 30.0
@@ -317,6 +317,21 @@ def status(env: dict[str, str] | None = None) -> dict[str, Any] | None:
         return None
 
 
+def stop_all() -> int:
+    """Stop every worker server of this user (``optkin workers stop --all``), those of
+    other environments and of earlier optkin files too; how many answered."""
+    try:
+        socks = sorted(runtime_dir().glob("workers-*.sock"))
+    except (OSError, ServerError):
+        return 0
+    n = 0
+    for path in socks:
+        with contextlib.suppress(OSError, ServerError, EOFError, ValueError):
+            _request(path, {"op": "stop"})
+            n += 1
+    return n
+
+
 def stop(env: dict[str, str] | None = None) -> bool:
     """Stop the worker server for this environment (``optkin workers stop``); whether
     one was running. Workers it forked for runs still going on are not touched: they
@@ -415,6 +430,11 @@ def start(idle_minutes: float = IDLE_MINUTES,
 
 class _Stop(Exception):
     pass
+
+
+def _threads() -> int:
+    """Threads of this process, the native ones too."""
+    return len(os.listdir("/proc/self/task"))
 
 
 def _watch_run(fd: int) -> None:
@@ -606,7 +626,6 @@ class _Server:
     def _warm(self, labels: list[str], ready: int, go: int) -> None:
         """In the warming copy: run the units, then wait for the old server's word."""
         import gc
-        import threading
 
         from optkin.problems.runner import worker_job
 
@@ -615,23 +634,32 @@ class _Server:
         os.dup2(null, 1)
         os.close(null)
         done = []
+        t0 = time.monotonic()
         for label in labels:
             if label in self.warmed:
                 done.append(label)
                 continue
+            if time.monotonic() - t0 > WARM_LIMIT / 2:  # the rest at the next warm-up
+                break
             spec = dict(self.specs[label], validate=False, time_limit=None)
+            t = time.monotonic()
             try:
                 worker_job("warm", spec, lambda msg: None)
                 done.append(label)
-            except BaseException:  # noqa: BLE001 - a problem that fails warms nothing
-                pass
-        # forking is safe in one thread only: wait for any a solver left (compiler waits)
-        end = time.monotonic() + 30.0
-        while (threading.active_count() > 1 or len(os.listdir("/proc/self/task")) > 1) \
-                and time.monotonic() < end:
-            time.sleep(0.05)
-        if threading.active_count() > 1 or len(os.listdir("/proc/self/task")) > 1:
-            os._exit(3)
+            except BaseException as e:  # noqa: BLE001 - a problem that fails warms nothing
+                print(f"warm-up {label}: {type(e).__name__}: {e}", file=sys.stderr)
+            # forking is safe in one thread only: a unit that leaves a thread running (a
+            # solver's pool) is named to the server, which warms up again without it
+            end = time.monotonic() + 2.0
+            while _threads() > 1 and time.monotonic() < end:
+                time.sleep(0.02)
+            if _threads() > 1:
+                print(f"warm-up {label}: leaves {_threads() - 1} thread(s) running; not "
+                      "warmed", file=sys.stderr, flush=True)
+                os.write(ready, b"b" + label.encode() + b"\n")
+                os._exit(3)
+            print(f"warm-up {label}: {time.monotonic() - t:.2f} s", file=sys.stderr,
+                  flush=True)
         gc.collect()
         gc.freeze()
         self.listener, self.ino = self._listen()
@@ -656,9 +684,14 @@ class _Server:
         assert w is not None
         now = time.monotonic()
         if readable:
-            got = os.read(w["ready"], 1)
+            got = os.read(w["ready"], 4096)
             if got == b"r":
                 w["since"] = now
+            elif got.startswith(b"b"):  # a unit that leaves a thread: again without it
+                self.failed.add(got[1:].split(b"\n")[0].decode(errors="replace"))
+                self._drop_warmer(kill=False, fail=False)
+                self._start_warmer()
+                return False
             else:  # it ended before it was ready
                 self._drop_warmer(kill=False)
                 return False
@@ -676,7 +709,7 @@ class _Server:
         self.warmer = None  # (not to be killed on the way out: it serves now)
         return True
 
-    def _drop_warmer(self, kill: bool) -> None:
+    def _drop_warmer(self, kill: bool, fail: bool = True) -> None:
         w = self.warmer
         assert w is not None
         if kill:
@@ -688,7 +721,8 @@ class _Server:
             os.close(fd)
         with contextlib.suppress(OSError):
             self.path.with_name(f".{self.path.name}.{w['pid']}").unlink()
-        self.failed |= set(w["labels"]) - self.warmed
+        if fail:
+            self.failed |= set(w["labels"]) - self.warmed
         self.warmer = None
 
     # -- the loop ----------------------------------------------------------------------
