@@ -253,11 +253,14 @@ def test_a_server_whose_module_path_changed_exits_instead_of_forking(runtime, tm
             assert got.wait(10) == -signal.SIGKILL
             (extra / "new_package.py").write_text("")
             time.sleep(1.2)  # the server checks at most once a second
-            assert sv.fork_worker(env, r, w, 2) is None
+            with pytest.raises(sv.ServerError, match="did not answer"):
+                sv.fork_worker(env, r, w, 2)
         finally:
             os.close(r)
             os.close(w)
         assert _wait_gone(info["pid"], 10)
+        (o,) = wk.run_jobs([wk.Job("a", _spec("a"))], threads=1)  # a worker of its own
+        assert o.kind == "done"
     finally:
         sv.stop()
         sv._KEYS.clear()
@@ -405,3 +408,27 @@ def test_a_unit_that_leaves_a_thread_running_is_not_warmed_and_the_rest_is(serve
 
 def _threads(pid: int) -> int:
     return len(os.listdir(f"/proc/{pid}/task"))
+
+
+def test_a_server_that_does_not_answer_costs_a_run_seconds_not_its_workers(server):
+    """A stopped (or wedged) server: the run's request times out and it starts a worker
+    of its own, on new pipes, since the server may still fork one on the ends it was sent
+    (here it does, once continued: that worker finds its run's end closed and exits)."""
+    os.kill(server["pid"], signal.SIGSTOP)
+    try:
+        t0 = time.monotonic()
+        (o,) = wk.run_jobs([wk.Job("a", _spec("a"))], threads=1)
+        assert o.kind == "done" and time.monotonic() - t0 < 30
+        with wk._IDLE_LOCK:
+            (w,) = [w for pool in wk._IDLE.values() for w in pool]
+        assert not isinstance(w.proc, sv.Forked)
+    finally:
+        os.kill(server["pid"], signal.SIGCONT)
+    time.sleep(1.0)  # it forks on the stale ends now
+    assert sv.status()["forked"] <= 1
+    (o,) = wk.run_jobs([wk.Job("b", _spec("b"))], threads=1)  # the own worker, still right
+    assert o.kind == "done" and o.result["worker"]["pid"] == w.proc.pid
+    end = time.monotonic() + 10
+    while [c for c in _children(server["pid"]) if _alive(c)] and time.monotonic() < end:
+        time.sleep(0.05)
+    assert [c for c in _children(server["pid"]) if _alive(c)] == []

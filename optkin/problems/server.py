@@ -272,8 +272,11 @@ class Forked:
 def fork_worker(env: dict[str, str], rfd: int, wfd: int, errfd: int) -> Forked | None:
     """A worker forked by this environment's server, on the given pipe ends (its stdin
     side ``rfd``, its stdout side ``wfd``, its stderr ``errfd``), or None when there is no
-    server to use (none running, disabled, unsupported, not answering): the caller starts
-    its own worker."""
+    server to use (none running, disabled, unsupported): the caller starts its own worker.
+
+    ``ServerError`` when the ends were sent but no answer came back (a server that died or
+    hangs): a worker may have been forked on them, so the caller must not give them to
+    another (it makes new ones; that worker, if any, exits when they close)."""
     if env.get(ENV_DISABLE, os.environ.get(ENV_DISABLE, "1")) == "0" or not supported():
         return None
     try:
@@ -287,15 +290,19 @@ def fork_worker(env: dict[str, str], rfd: int, wfd: int, errfd: int) -> Forked |
             cwd = os.getcwd()
         except OSError:
             cwd = "/"
+    except (OSError, ServerError, ValueError):
+        return None
+    try:
         got, fds = _request(path, {"op": "fork", "env": env, "cwd": cwd},
                             [rfd, wfd, errfd], maxfds=1)
-        if not got.get("pid") or len(fds) != 1:
-            for fd in fds:
-                os.close(fd)
-            return None
-        return Forked(int(got["pid"]), fds[0], path)
-    except (OSError, ServerError, EOFError, ValueError, KeyError):
-        return None
+    except (OSError, ServerError, EOFError, ValueError) as e:
+        raise ServerError(f"the worker server at {path} did not answer: "
+                          f"{type(e).__name__}: {e}") from None
+    if not got.get("pid") or len(fds) != 1:
+        for fd in fds:
+            os.close(fd)
+        raise ServerError(f"the worker server at {path} forked no worker: {got}")
+    return Forked(int(got["pid"]), fds[0], path)
 
 
 def status(env: dict[str, str] | None = None) -> dict[str, Any] | None:

@@ -263,15 +263,24 @@ class _Worker:
         import optkin
 
         root = str(Path(optkin.__file__).resolve().parent.parent)
+        from optkin.problems.server import ServerError, fork_worker
+
         p2c_r, p2c_w = os.pipe()
         c2p_r, c2p_w = os.pipe()
         self.stderr = tempfile.TemporaryFile()
         try:
-            from optkin.problems.server import fork_worker
-
             # forked ready by this user's worker server when one runs for this
             # environment, else a new process that imports everything itself
-            self.proc: Any = fork_worker(env, p2c_r, c2p_w, self.stderr.fileno())
+            try:
+                self.proc: Any = fork_worker(env, p2c_r, c2p_w, self.stderr.fileno())
+            except ServerError:  # the ends went out: new ones for a worker of our own
+                for fd in (p2c_r, p2c_w, c2p_r, c2p_w):
+                    os.close(fd)
+                self.stderr.close()
+                p2c_r, p2c_w = os.pipe()
+                c2p_r, c2p_w = os.pipe()
+                self.stderr = tempfile.TemporaryFile()
+                self.proc = None
             self.forked = self.proc is not None
             if self.proc is None:
                 self.proc = subprocess.Popen(
