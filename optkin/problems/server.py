@@ -24,8 +24,17 @@ Safety:
   upgrade changes), and the environment variables read when modules are imported
   (``PYTHON*``, ``LD_*``, ``MALLOC_*``, BLAS, numpy, CasADi, pydantic and ``OPTKIN_*``).
   A run with anything else different finds no server and starts its own workers, so a
-  server never hands out stale code. The server checks the same for itself on each
-  request and exits once it no longer matches.
+  server never hands out stale code. The server checks the same for itself (on a
+  request, at most once a second) and exits once it no longer matches.
+
+After each run it has served, the run tells the server what it did (of each kind of work:
+topology, task kinds, pictures or not, the unit estimated cheapest, if under
+:data:`WARM_MAX_COST`). A copy of the server runs those units once, their results thrown
+away, and takes over the socket (the old server first answers what is queued on it and
+passes on what was asked meanwhile): the next run's workers are forked with those models,
+compiled code and modules (matplotlib, cvxpy) loaded. Forking is safe only in a process of
+one thread, so a unit that leaves a thread running (a solver's pool) is named in the log
+and left out, and the copy starts again without it.
 
 A forked worker runs with one BLAS thread (as every worker of a parallel run does), in the
 run's working directory and with the run's environment. Linux only (``fork``, file
