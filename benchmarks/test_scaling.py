@@ -503,7 +503,6 @@ def test_scaling(benchmark, tmp_path):
     # a worker server for the "server" runs, in a runtime directory of its own (short: a
     # socket path has at most 107 bytes), warmed up by one run of the batch
     runtime = Path(tempfile.mkdtemp(prefix="okb"))
-    start_server(batch, filled, runtime, tmp_path / "prime")
 
     def measure():
         walls: dict[str, list[float]] = {}
@@ -572,6 +571,7 @@ def test_scaling(benchmark, tmp_path):
         return (walls, same, units, parent_cpu, fixed, sums, float(np.median(triv_cpu)))
 
     try:
+        start_server(batch, filled, runtime, tmp_path / "prime")
         walls, same, units, parent_cpu, fixed_samples, sums, triv_cpu = benchmark.pedantic(
             measure, rounds=1, iterations=1)
         # the set-up of each topology in a worker forked by the (warmed) server
