@@ -371,13 +371,17 @@ def warm(env: dict[str, str], units: list[dict[str, Any]]) -> bool:
     itself that then takes over, so the next run's workers find their models loaded.
     Never raises; whether the server took the request."""
     try:
-        path = socket_path(env)
-        req = {"op": "warm", "units": [
-            dict(u, data=base64.b64encode(u["data"]).decode()) for u in units]}
-        got, _ = _request(path, req, timeout=1.0)
-        return bool(got.get("ok"))
+        return _warm_request(socket_path(env), units, timeout=1.0)
     except (OSError, ServerError, EOFError, ValueError, KeyError, TypeError):
         return False
+
+
+def _warm_request(path: Path, units: list[dict[str, Any]], timeout: float) -> bool:
+    """Send ``units`` (their ``data`` as bytes) to the server at ``path`` to warm up with."""
+    req = {"op": "warm", "units": [
+        dict(u, data=base64.b64encode(u["data"]).decode()) for u in units]}
+    got, _ = _request(path, req, timeout=timeout)
+    return bool(got.get("ok"))
 
 
 _SERVER_BOOT = (
@@ -748,10 +752,9 @@ class _Server:
         units = [{"label": label, "display": u["display"], "source": u["source"],
                   "data": u["data"], "pictures": u["pictures"], "only": u["only"]}
                  for label, u in self.specs.items() if label not in self.handed]
-        if units:
+        if units:  # (to the path, which names the copy now: not this process's key)
             with contextlib.suppress(OSError, ServerError, EOFError, ValueError):
-                _request(self.path, {"op": "warm", "units": [
-                    dict(u, data=base64.b64encode(u["data"]).decode()) for u in units]})
+                _warm_request(self.path, units, timeout=_TIMEOUT)
 
     def _drain(self) -> None:
         """Answer the connections already queued here: since the path names the warmed
