@@ -432,3 +432,121 @@ def test_a_server_that_does_not_answer_costs_a_run_seconds_not_its_workers(serve
     while [c for c in _children(server["pid"]) if _alive(c)] and time.monotonic() < end:
         time.sleep(0.05)
     assert [c for c in _children(server["pid"]) if _alive(c)] == []
+
+
+# ---------------------------------------------------------------------------------------
+# the Dask driver: `optkin run --scheduler` with its client in a process the server forks
+# ---------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A Dask worker in a process of its own (one in this process would put its directory
+    on this process's module path: another environment, which no server serves)."""
+    distributed = pytest.importorskip("distributed")
+    env = dict(os.environ)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, silence_logs=50) as c:
+        # (starting one leaves PYTHONHASHSEED, thread counts and a malloc variable here)
+        os.environ.clear()
+        os.environ.update(env)
+        yield c
+
+
+def _outputs(out: Path) -> dict[str, str]:
+    return {p.name: json.dumps(_numbers([t["output"] for t in json.loads(p.read_text())["tasks"]]))
+            for p in sorted(out.glob("*.json")) if p.name != "summary.json"}
+
+
+def test_a_dask_run_drives_its_client_from_a_forked_process(server, cluster, tmp_path):
+    """With a server, ``--scheduler`` sends its tasks through a driver the server forks
+    and gets what a run without Dask gets; the server then imports ``distributed``, and the
+    next driver starts with it loaded (its own account: ``preloaded``)."""
+    from optkin.cli import main
+    from optkin.problems import dask_client
+
+    src = tmp_path / "problems"
+    src.mkdir()
+    for f in ("four_bar.toml", "rpr3.toml", "five_bar.toml"):
+        shutil.copy(PROBLEMS / f, src / f)
+    assert main(["run", str(src), "--out", str(tmp_path / "serial"), "--no-pictures",
+                 "--jobs", "1", "-q"]) == 0
+    assert main(["run", str(src), "--out", str(tmp_path / "dask"), "--no-pictures", "-q",
+                 "--scheduler", cluster.scheduler_address]) == 0
+    assert _outputs(tmp_path / "dask") == _outputs(tmp_path / "serial")
+    assert len(_outputs(tmp_path / "dask")) == 3
+    info = _served_by_a_new_server(server["pid"])
+    end = time.monotonic() + 60  # (a unit's warm-up may take over first)
+    while sv.DASK_LABEL not in info["warmed"] and time.monotonic() < end:
+        time.sleep(0.1)
+        info = sv.status() or info
+    assert sv.DASK_LABEL in info["warmed"], info
+    session = dask_client.connect(cluster.scheduler_address)
+    try:
+        assert session.info["driver"] and session.info["preloaded"], session.info
+        assert _ppid(session.info["pid"]) == sv.status()["pid"]
+        assert session.slots == 1
+        got = []
+        session.run([("optkin-test-0", 1, [_spec("a", "rpr3.toml")])], 60.0,
+                    lambda i, rs, why: got.append((i, rs, why)))
+        ((i, (r,), why),) = got
+        assert i == 0 and why is None and r["kind"] == "done"
+        assert json.dumps(_numbers([t["output"] for t in r["result"]["tasks"]])) == \
+            _outputs(tmp_path / "serial")["rpr3.json"]
+    finally:
+        session.close()
+    # without a server the client runs here, as before
+    os.environ[sv.ENV_DISABLE] = "0"
+    try:
+        session = dask_client.connect(cluster.scheduler_address)
+        assert not session.info["driver"]
+        session.close()
+    finally:
+        del os.environ[sv.ENV_DISABLE]
+
+
+def test_a_dask_driver_that_dies_fails_the_tasks_left_and_one_left_alone_exits(server,
+                                                                              cluster):
+    from optkin.problems import dask_client
+
+    session = dask_client.connect(cluster.scheduler_address)
+    assert session.info["driver"]
+    session.proc.kill()
+    got = []
+    t0 = time.monotonic()
+    session.run([("optkin-test-1", 2, [_spec("a")]), ("optkin-test-2", 1, [_spec("b")])],
+                60.0, lambda i, rs, why: got.append((i, rs, why)))
+    session.close()
+    assert time.monotonic() - t0 < 10
+    assert [(i, rs) for i, rs, _ in got] == [(0, None), (1, None)]
+    assert all("Dask driver process ended" in why for _, _, why in got), got
+    # a run that ends (or dies) closes its pipes: the driver waiting for tasks exits
+    session = dask_client.connect(cluster.scheduler_address)
+    pid = session.info["pid"]
+    assert _alive(pid)
+    for fd in (session.wfd, session.rfd):
+        os.close(fd)
+    assert _wait_gone(pid, 5)
+    session.wfd = session.rfd = -1
+    session.close()
+
+
+def test_a_scheduler_that_is_not_dask_is_a_user_error_through_the_driver(server, monkeypatch):
+    import socket
+
+    from optkin.errors import ProblemFileError
+    from optkin.problems import dask_client
+
+    monkeypatch.setattr(dask_client, "DASK_CONNECT_TIMEOUT", 2.0)
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(8)  # accepts (the kernel does), never answers
+    forked = sv.status()["forked"]
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(ProblemFileError, match="--scheduler: cannot connect"):
+            dask_client.connect(f"tcp://127.0.0.1:{srv.getsockname()[1]}")
+        assert time.monotonic() - t0 < 2.0 + 5.0 + 3.0
+    finally:
+        srv.close()
+    assert sv.status()["forked"] == forked + 1  # the driver said so

@@ -942,32 +942,28 @@ def _run_dask(address: str, jobs: list[Job], time_limit: float,
               done: Callable[[JobOutcome], None]) -> None:
     from optkin.problems.dask_client import connect
 
-    client = connect(address)  # (it registered the plugin that prestarts optkin workers)
+    # (the connection registered the plugin that prestarts the Dask workers' optkin workers)
+    session = connect(address)
     try:
-        from distributed import as_completed
+        batches = _dask_batches(jobs, session.slots or len(jobs))
+        tasks = [  # the longest first, as for the local pool (jobs come sorted)
+            (f"optkin-{input_hash(batch[0].spec['data'])[:12]}-{i}", len(batches) - i,
+             [job.spec for job in batch]) for i, batch in enumerate(batches)]
 
-        from optkin.problems.dask_worker import run_units
-
-        try:
-            slots = sum(client.nthreads().values())
-        except Exception:  # noqa: BLE001 - a scheduler that does not say: one task a unit
-            slots = len(jobs)
-        batches = _dask_batches(jobs, slots)
-        futures = {  # the longest first, as for the local pool (jobs come sorted)
-            client.submit(run_units, [job.spec for job in batch], time_limit,
-                          key=f"optkin-{input_hash(batch[0].spec['data'])[:12]}-{i}",
-                          priority=len(batches) - i, pure=False): batch
-            for i, batch in enumerate(batches)
-        }
-        for f in as_completed(list(futures)):
-            batch = futures[f]
-            try:
-                rs = f.result()
-            except Exception as e:  # noqa: BLE001 - a lost Dask worker, a cancelled task
-                for job in batch:
-                    done(JobOutcome(job.key, "error", message=f"{type(e).__name__}: {e}"))
-                continue
-            for job, r in zip(batch, rs):
+        def finished(i: int, rs: list[dict[str, Any]] | None, why: str | None) -> None:
+            if rs is None:
+                for job in batches[i]:
+                    done(JobOutcome(job.key, "error", message=why or "the Dask task failed"))
+                return
+            for job, r in zip(batches[i], rs):
                 done(JobOutcome(job.key, r["kind"], r["result"], r["pictures"], r["message"]))
+
+        session.run(tasks, time_limit, finished)
     finally:
-        client.close()
+        session.close()
+    if session.info.get("driver") and not session.info.get("preloaded"):
+        # the worker server imports distributed for the next run's driver
+        from optkin.problems import server
+        from optkin.problems.workers import _worker_env
+
+        server.warm(_worker_env(None), [{"label": server.DASK_LABEL, "dask": True}])

@@ -36,6 +36,11 @@ compiled code and modules (matplotlib, cvxpy) loaded. Forking is safe only in a 
 one thread, so a unit that leaves a thread running (a solver's pool) is named in the log
 and left out, and the copy starts again without it.
 
+``optkin run --scheduler`` takes from the server a *Dask driver* instead: a forked process
+that holds the run's Dask client (:func:`optkin.problems.dask_client.serve_driver`). After
+the first such run the server imports ``distributed`` (:data:`DASK_MODULES`), so the next
+run's client connects without the 0.3 s import, and the run itself never imports it.
+
 A forked worker runs with one BLAS thread (as every worker of a parallel run does), in the
 run's working directory and with the run's environment. Linux only (``fork``, file
 descriptors passed over the socket, ``pidfd``); elsewhere runs start their own workers.
@@ -75,7 +80,7 @@ ENV_DISABLE = "OPTKIN_WORKER_SERVER"
 #: Environment variables read when modules are imported (a server's workers must match
 #: the run in these); the thread counts are left out: a server's workers run one thread.
 _IMPORT_ENV = ("PYTHON", "LD_", "MALLOC_", "OMP_", "OPENBLAS_", "MKL_", "NPY_", "NUMPY_",
-               "CASADI", "PYDANTIC", "OPTKIN_", "VIRTUAL_ENV", "CONDA_PREFIX")
+               "CASADI", "PYDANTIC", "DASK_", "OPTKIN_", "VIRTUAL_ENV", "CONDA_PREFIX")
 _THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 _NOT_KEYED = (ENV_DISABLE, "MALLOC_TRIM_THRESHOLD_", *_THREAD_ENV)
 _MAX_REQUEST = 1 << 20
@@ -278,10 +283,13 @@ class Forked:
                 os.close(self._pidfd)
 
 
-def fork_worker(env: dict[str, str], rfd: int, wfd: int, errfd: int) -> Forked | None:
+def fork_worker(env: dict[str, str], rfd: int, wfd: int, errfd: int,
+                role: str = "worker") -> Forked | None:
     """A worker forked by this environment's server, on the given pipe ends (its stdin
     side ``rfd``, its stdout side ``wfd``, its stderr ``errfd``), or None when there is no
     server to use (none running, disabled, unsupported): the caller starts its own worker.
+    ``role`` ``"dask"``: the process is instead a Dask driver for ``optkin run
+    --scheduler`` (:func:`optkin.problems.dask_client.serve_driver`).
 
     ``ServerError`` when the ends were sent but no answer came back (a server that died or
     hangs): a worker may have been forked on them, so the caller must not give them to
@@ -302,7 +310,7 @@ def fork_worker(env: dict[str, str], rfd: int, wfd: int, errfd: int) -> Forked |
     except (OSError, ServerError, ValueError):
         return None
     try:
-        got, fds = _request(path, {"op": "fork", "env": env, "cwd": cwd},
+        got, fds = _request(path, {"op": "fork", "env": env, "cwd": cwd, "role": role},
                             [rfd, wfd, errfd], maxfds=1)
     except (OSError, ServerError, EOFError, ValueError) as e:
         raise ServerError(f"the worker server at {path} did not answer: "
@@ -379,7 +387,8 @@ def warm(env: dict[str, str], units: list[dict[str, Any]]) -> bool:
 def _warm_request(path: Path, units: list[dict[str, Any]], timeout: float) -> bool:
     """Send ``units`` (their ``data`` as bytes) to the server at ``path`` to warm up with."""
     req = {"op": "warm", "units": [
-        dict(u, data=base64.b64encode(u["data"]).decode()) for u in units]}
+        dict(u, data=base64.b64encode(u["data"]).decode()) if "data" in u else dict(u)
+        for u in units]}
     got, _ = _request(path, req, timeout=timeout)
     return bool(got.get("ok"))
 
@@ -491,9 +500,14 @@ def _child(req: dict[str, Any], rfd: int, wfd: int, errfd: int,
         import threading
 
         threading.Thread(target=_watch_run, args=(rfd,), daemon=True).start()
-        from optkin.problems.workers import serve
+        if req.get("role") == "dask":
+            from optkin.problems.dask_client import serve_driver
 
-        serve(rfd, wfd, None)
+            serve_driver(rfd, wfd)
+        else:
+            from optkin.problems.workers import serve
+
+            serve(rfd, wfd, None)
     except BaseException:  # noqa: BLE001 - a worker never returns into the server's loop
         import traceback
 
@@ -509,6 +523,10 @@ WARM_LIMIT = 60.0
 _HANDOFF_WAIT = 10.0
 #: Most units a server keeps to warm up with (the most recent first).
 WARM_MAX = 24
+#: What a server imports once a run has used a Dask driver it forked (label
+#: :data:`DASK_LABEL`): the next driver connects without importing ``distributed`` (0.3 s).
+DASK_MODULES = ("distributed", "optkin.problems.dask_worker", "optkin.problems.dask_client")
+DASK_LABEL = "dask-driver"
 
 
 class _Server:
@@ -603,6 +621,9 @@ class _Server:
                     if label in self.failed:
                         continue
                     self.specs.pop(label, None)  # the most recent last
+                    if u.get("dask"):  # a Dask driver's modules, nothing else
+                        self.specs[label] = {"dask": True}
+                        continue
                     self.specs[label] = {
                         "display": str(u["display"]), "source": str(u["source"]),
                         "data": base64.b64decode(u["data"]),
@@ -646,6 +667,7 @@ class _Server:
     def _warm(self, labels: list[str], ready: int, go: int) -> None:
         """In the warming copy: run the units, then wait for the old server's word."""
         import gc
+        import importlib
 
         from optkin.problems.runner import worker_job
 
@@ -664,7 +686,11 @@ class _Server:
             spec = dict(self.specs[label], validate=False, time_limit=None)
             t = time.monotonic()
             try:
-                worker_job("warm", spec, lambda msg: None)
+                if spec.get("dask"):
+                    for name in DASK_MODULES:
+                        importlib.import_module(name)
+                else:
+                    worker_job("warm", spec, lambda msg: None)
                 done.append(label)
             except BaseException as e:  # noqa: BLE001 - a problem that fails warms nothing
                 print(f"warm-up {label}: {type(e).__name__}: {e}", file=sys.stderr)
@@ -749,7 +775,8 @@ class _Server:
 
     def _forward(self) -> None:
         """Pass to the warmed copy the units asked for since it was forked."""
-        units = [{"label": label, "display": u["display"], "source": u["source"],
+        units = [{"label": label, "dask": True} if u.get("dask") else
+                 {"label": label, "display": u["display"], "source": u["source"],
                   "data": u["data"], "pictures": u["pictures"], "only": u["only"]}
                  for label, u in self.specs.items() if label not in self.handed]
         if units:  # (to the path, which names the copy now: not this process's key)
