@@ -550,3 +550,31 @@ def test_a_scheduler_that_is_not_dask_is_a_user_error_through_the_driver(server,
     finally:
         srv.close()
     assert sv.status()["forked"] == forked + 1  # the driver said so
+
+
+def test_a_driver_that_dies_before_it_connects_leaves_the_run_its_own_client(cluster,
+                                                                             monkeypatch):
+    """A driver gone before its first answer (a server stopping) costs nothing but the
+    fork: the run connects from its own process instead."""
+    from optkin.problems import dask_client
+
+    def dead(address, timeout):
+        r, w = os.pipe()
+        os.close(w)  # what the run reads from it: end of file at once
+        r2, w2 = os.pipe()
+        os.close(r2)
+        proc = subprocess.Popen([sys.executable, "-c", "pass"])
+        proc.wait()
+        return dask_client._Driver(proc, r, w2, tempfile.TemporaryFile(), address, timeout)
+
+    monkeypatch.setattr(dask_client, "_fork_driver", dead)
+    session = dask_client.connect(cluster.scheduler_address)
+    try:
+        assert not session.info["driver"] and session.slots == 1
+        got = []
+        session.run([("optkin-test-3", 1, [_spec("a")])], 60.0,
+                    lambda i, rs, why: got.append((i, rs, why)))
+        ((i, (r,), why),) = got
+        assert i == 0 and why is None and r["kind"] == "done", r
+    finally:
+        session.close()

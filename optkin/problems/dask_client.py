@@ -142,13 +142,14 @@ class _Driver(Session):
         return self._slots
 
     def _recv(self, limit: float | None) -> Any:
-        """The driver's next message; EOFError when it ended or ``limit`` seconds passed."""
+        """The driver's next message; EOFError when it ended, TimeoutError when ``limit``
+        seconds passed without one."""
         from optkin.problems.workers import _recv
 
         if limit is not None:
             r, _, _ = select.select([self.rfd], [], [], max(0.0, limit))
             if not r:
-                raise EOFError(f"no answer within {limit:g} s")
+                raise TimeoutError(f"no answer within {limit:g} s")
         return _recv(self.rfd)
 
     def connected(self) -> Session | None:
@@ -160,10 +161,10 @@ class _Driver(Session):
         waited = self.timeout + 5.0
         try:
             msg = self._recv(waited)
+        except TimeoutError:  # alive and silent past the connect timeout
+            self.close()
+            raise _cannot(self.address, _why({}, True, waited)) from None
         except (EOFError, OSError, pickle.UnpicklingError, struct.error):
-            if self.proc.poll() is None:  # alive and silent past the connect timeout
-                self.close()
-                raise _cannot(self.address, _why({}, True, waited)) from None
             self.close()
             return None
         if msg[0] == "connected":
