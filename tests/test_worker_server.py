@@ -310,6 +310,25 @@ def test_the_workers_command(runtime):
     assert r.returncode == 2 and "--idle must be in" in r.stderr
 
 
+def test_the_console_script_and_python_m_find_the_same_server(runtime):
+    """``optkin`` (its module path starts with the scripts folder) and ``python -m optkin``
+    (which does not) share one server."""
+    script = Path(sys.executable).with_name("optkin")
+    if not script.exists():
+        pytest.skip("the optkin console script is not installed next to this Python")
+    r = subprocess.run([sys.executable, "-m", "optkin", "workers", "start", "--idle", "5"],
+                       capture_output=True, text=True, timeout=120, env=dict(os.environ))
+    assert r.returncode == 0 and "started (pid" in r.stdout, r.stdout + r.stderr
+    pid = int(r.stdout.split("(pid ")[1].split(",")[0])
+    r = subprocess.run([str(script), "workers", "status"], capture_output=True, text=True,
+                       timeout=120, env=dict(os.environ))
+    assert r.returncode == 0 and f"running (pid {pid}" in r.stdout, r.stdout + r.stderr
+    r = subprocess.run([str(script), "workers", "stop"], capture_output=True, text=True,
+                       timeout=120, env=dict(os.environ))
+    assert r.returncode == 0 and "stopped" in r.stdout
+    assert _wait_gone(pid, 10)
+
+
 def _maps(pid: int) -> str:
     return Path(f"/proc/{pid}/maps").read_text()
 
@@ -444,12 +463,15 @@ def cluster():
     """A Dask worker in a process of its own (one in this process would put its directory
     on this process's module path: another environment, which no server serves)."""
     distributed = pytest.importorskip("distributed")
-    env = dict(os.environ)
+    env, path = dict(os.environ), list(sys.path)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
                                   dashboard_address=None, silence_logs=50) as c:
-        # (starting one leaves PYTHONHASHSEED, thread counts and a malloc variable here)
+        # starting one leaves PYTHONHASHSEED, thread counts and a malloc variable here, and
+        # its scheduler's scratch folders on the module path (whose modification times
+        # change as Dask works in them: a key no server would keep)
         os.environ.clear()
         os.environ.update(env)
+        sys.path[:] = path
         yield c
 
 

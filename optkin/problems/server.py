@@ -132,7 +132,9 @@ def boot_path() -> list[str]:
 def _fingerprint(path: list[str]) -> str:
     h = hashlib.sha256()
     root = _optkin_root()
-    h.update(f"{sys.executable}\0{sys.version}\0{root}\0".encode())
+    # (the interpreter itself: ``optkin``'s script names ``python3``, ``python -m`` may be
+    # ``python``, links to one file; the module path below tells environments apart)
+    h.update(f"{os.path.realpath(sys.executable)}\0{sys.version}\0{root}\0".encode())
     for p in sorted(root.rglob("*.py")):
         with contextlib.suppress(OSError):
             st = p.stat()

@@ -191,7 +191,28 @@ def _boot_path() -> list[str]:
         cwd = os.getcwd()
     except OSError:  # the working directory was removed
         cwd = "."
-    return [p for p in sys.path if p and p not in (".", cwd)]
+    path = list(sys.path)
+    if path and path[0] in _script_dirs():  # the ``optkin`` console script's own folder
+        path = path[1:]
+    return [p for p in path if p and p not in (".", cwd)]
+
+
+def _script_dirs() -> set[str]:
+    """Where console scripts are installed (the interpreter's, the installation's and the
+    user's): the first entry of the module path of a process started as ``optkin``, which
+    ``python -m optkin`` does not have; no module is imported from there. Left out of a
+    worker's path, so that both find the same worker server
+    (:func:`optkin.problems.server.key` hashes the path)."""
+    import sysconfig
+
+    dirs = {os.path.dirname(sys.executable)}
+    for scheme in (None, f"{os.name}_user"):
+        with contextlib.suppress(KeyError, ValueError):
+            got = sysconfig.get_path("scripts", scheme) if scheme else \
+                sysconfig.get_path("scripts")
+            if got:
+                dirs.add(got)
+    return dirs
 
 
 # ---------------------------------------------------------------------------
