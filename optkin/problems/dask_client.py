@@ -184,31 +184,43 @@ class _Driver(Session):
 
         left = set(range(len(tasks)))
         why = "the Dask driver process ended"
+        lost: BaseException | None = None
         try:
             _send(self.wfd, ("run", tasks, time_limit))
-            while left:
+        except OSError as e:
+            lost = e
+        while left and lost is None:
+            try:
                 msg = self._recv(None)
-                if msg[0] == "done":
-                    left.discard(msg[1])
-                    on_done(msg[1], msg[2], msg[3])
-                elif msg[0] == "failed":
-                    why = str(msg[1])
-                    break
-        except (EOFError, OSError, pickle.UnpicklingError, struct.error) as e:
-            why = f"{why} ({type(e).__name__}: {e})" if str(e) else why
-            with contextlib.suppress(Exception):
-                self.proc.wait(timeout=1.0)
-            with contextlib.suppress(Exception):
-                status = self.proc.poll()
-                if status is not None:
-                    why = f"{why}, status {status}"
-            with contextlib.suppress(OSError):
-                self.stderr.seek(0)
-                tail = self.stderr.read()[-400:].decode(errors="replace").strip()
-                if tail:
-                    why = f"{why}: {tail.splitlines()[-1]}"
+            except (EOFError, OSError, pickle.UnpicklingError, struct.error) as e:
+                lost = e
+                break
+            if msg[0] == "done":  # (the run's own errors, in on_done, are not the driver's)
+                left.discard(msg[1])
+                on_done(msg[1], msg[2], msg[3])
+            elif msg[0] == "failed":
+                why = str(msg[1])
+                break
+        if lost is not None:
+            why = self._death(why, lost)
         for i in sorted(left):
             on_done(i, None, why)
+
+    def _death(self, why: str, e: BaseException) -> str:
+        """What is known of the driver's end: the error, its exit status, its last word."""
+        why = f"{why} ({type(e).__name__}: {e})" if str(e) else why
+        with contextlib.suppress(Exception):
+            self.proc.wait(timeout=1.0)
+        with contextlib.suppress(Exception):
+            status = self.proc.poll()
+            if status is not None:
+                why = f"{why}, status {status}"
+        with contextlib.suppress(OSError, ValueError):
+            self.stderr.seek(0)
+            tail = self.stderr.read()[-400:].decode(errors="replace").strip()
+            if tail:
+                why = f"{why}: {tail.splitlines()[-1]}"
+        return why
 
     def close(self) -> None:
         for fd in (self.wfd, self.rfd):  # the driver exits when its pipe closes
@@ -310,6 +322,10 @@ def serve_driver(rfd: int, wfd: int) -> None:
     try:
         _, address, timeout = _recv(rfd)
         t0 = time.perf_counter()
+        if preloaded:  # Dask's configuration as this run finds it (its files, DASK_*), not
+            import dask.config  # as it was when the server imported distributed (1 ms)
+
+            dask.config.refresh()
         box: dict[str, Any] = {}
         _connect(address, box, float(timeout))
         if box.get("missing"):
