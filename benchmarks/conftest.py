@@ -185,9 +185,11 @@ def naive_nlpsol_forward(mech: optkin.Mechanism):
     model = optkin.get_model(mech)
 
     def solve(qa, x0):
-        x = ca.SX.sym("x", model.nx)
-        phi = ca.substitute(model.phi_sym, model.qa_sym, ca.DM(qa))
-        phi = ca.substitute(phi, model.x_sym, x)
+        qa_s, x_s, p_s, phi_s = model.symbols
+        x = ca.SX.sym("x", x_s.numel())
+        phi = ca.substitute(phi_s, ca.vertcat(qa_s, p_s),
+                            ca.vertcat(ca.DM(qa), ca.DM(np.asarray(model.p, dtype=float))))
+        phi = ca.substitute(phi, x_s, x)
         S = ca.nlpsol("naive", "ipopt", {"x": x, "f": ca.sumsqr(x - x0), "g": phi},
                       {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
                        "error_on_fail": False, "ipopt.tol": 1e-10})

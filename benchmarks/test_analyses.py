@@ -83,7 +83,7 @@ def _naive_multistart(mech, qa, n, seed=0):
             x0 = np.r_[rng.uniform(-1, 1, 2), rng.uniform(0, 2), qq / np.linalg.norm(qq)]
         else:
             x0 = model.default_x(qa) + rng.uniform(-1, 1, model.nx) * model.x_scale
-        r = S(x0=x0, p=np.r_[qa, x0], lbg=0, ubg=0)
+        r = S(x0=x0, p=np.r_[qa, x0, model.p], lbg=0, ubg=0)  # (q_a, guess, geometry)
         if S.stats()["success"]:
             x = model.canonical_x(np.array(r["x"]).ravel())
             if all(np.max(np.abs(x - y)) > 1e-6 for y in sols):

@@ -105,8 +105,9 @@ def test_assembly_modes_rpr3_six(benchmark):
     t_naive, n_naive, k_naive = naive_multistart(m, SIX_S, 6, 2000)
     record(benchmark, t_poly, "univariate polynomial (numpy.roots), the floor",
            mechanism="rpr3-six", count=len(res), complete_in_20_seeds=complete,
-           starts=res.info["starts"], stop_reason=res.info["stop_reason"],
-           compiled=res.info["jit"], setup_s=setup, naive_ipopt_s=t_naive,
+           method=res.info.get("method"), starts=res.info.get("starts"),
+           stop_reason=res.info.get("stop_reason"), paths=res.info.get("root_count"),
+           compiled=res.info.get("jit"), setup_s=setup, naive_ipopt_s=t_naive,
            naive_ipopt_starts=n_naive, naive_ipopt_found=k_naive, target_s=2e-3,
            meets_target=bool(benchmark.stats.stats.median <= 2e-3))
     assert len(res) == 6
@@ -126,8 +127,9 @@ def test_assembly_modes_stewart_dietmaier(benchmark):
     t_naive, n_naive, k_naive = naive_multistart(m, DIET_L, 40, 4000)
     record(benchmark, t_naive, "naive random multi-start IPOPT until all 40 are seen",
            mechanism="stewart-dietmaier", count=len(res), complete_in_20_seeds=complete,
-           starts=res.info["starts"], stop_reason=res.info["stop_reason"],
-           compiled=res.info["jit"], setup_s=setup, naive_ipopt_starts=n_naive,
+           method=res.info.get("method"), starts=res.info.get("starts"),
+           stop_reason=res.info.get("stop_reason"), paths=res.info.get("root_count"),
+           compiled=res.info.get("jit"), setup_s=setup, naive_ipopt_starts=n_naive,
            naive_ipopt_found=k_naive, target_s=50e-3,
            meets_target=bool(benchmark.stats.stats.median <= 50e-3))
     assert len(res) == 40
