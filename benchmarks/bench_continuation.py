@@ -95,7 +95,8 @@ def run(n_grid: int = 2000, rounds: int = 3) -> dict:
 def test_five_bar_locus_and_aspects(benchmark):
     info = benchmark.pedantic(run, kwargs={"n_grid": 2000, "rounds": 3}, rounds=1, iterations=1)
     benchmark.extra_info.update(info)
-    assert info["aspects_status"] == "ok"
+    assert info["aspects_status"] == "optimal"  # (optkin.results.OPTIMAL)
+    assert info["aspect_counts"] == 10  # Chablat and Wenger: 2 + 3 + 3 + 2
     assert info["grid_aspect_counts"] == [2, 3, 3, 2]
 
 
