@@ -27,7 +27,6 @@ from __future__ import annotations
 import contextlib
 import os
 import select
-import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -239,27 +238,15 @@ class _Driver(Session):
 def _fork_driver(address: str, timeout: float) -> _Driver | None:
     """A driver forked by this environment's worker server and told to connect, or None
     (no server to use)."""
-    from optkin.problems.server import ServerError, fork_worker
-    from optkin.problems.workers import _send, _worker_env
+    from optkin.problems.workers import _send, _worker_env, fork_from_server
 
-    p2c_r, p2c_w = os.pipe()
-    c2p_r, c2p_w = os.pipe()
-    stderr = tempfile.TemporaryFile()
-    try:
-        proc = fork_worker(_worker_env(None), p2c_r, c2p_w, stderr.fileno(), role="dask")
-    except ServerError:
-        proc = None
-    finally:
-        os.close(p2c_r)
-        os.close(c2p_w)
-    if proc is None:  # (a driver forked late on these ends exits when they close)
-        for fd in (p2c_w, c2p_r):
-            os.close(fd)
-        stderr.close()
+    got = fork_from_server(_worker_env(None), role="dask")
+    if got is None:
         return None
-    driver = _Driver(proc, c2p_r, p2c_w, stderr, address, timeout)
+    proc, wfd, rfd, stderr = got
+    driver = _Driver(proc, rfd, wfd, stderr, address, timeout)
     try:
-        _send(p2c_w, ("connect", address, timeout))
+        _send(wfd, ("connect", address, timeout))
     except OSError:
         driver.close()
         return None

@@ -277,6 +277,33 @@ class _Pending:
         self.policy.put_back(self.index[id(job)])
 
 
+def fork_from_server(env: dict[str, str], role: str = "worker"
+                     ) -> tuple[Any, int, int, Any] | None:
+    """A process forked by this environment's worker server on new pipes (a worker, or a
+    Dask driver with ``role="dask"``): ``(proc, wfd, rfd, stderr)``, its input's write end,
+    its output's read end and its standard error (a temporary file); None when there is no
+    server to use. Nothing is left open then: ends sent to a server that did not answer
+    are closed here (a process it forks late on them exits when they close)."""
+    from optkin.problems.server import ServerError, fork_worker
+
+    p2c_r, p2c_w = os.pipe()
+    c2p_r, c2p_w = os.pipe()
+    stderr = tempfile.TemporaryFile()
+    try:
+        proc = fork_worker(env, p2c_r, c2p_w, stderr.fileno(), role=role)
+    except ServerError:
+        proc = None
+    finally:
+        os.close(p2c_r)
+        os.close(c2p_w)
+    if proc is None:
+        os.close(p2c_w)
+        os.close(c2p_r)
+        stderr.close()
+        return None
+    return proc, p2c_w, c2p_r, stderr
+
+
 class _Worker:
     """A worker process, its pipes, and the reader thread feeding the shared queue."""
 
@@ -284,36 +311,28 @@ class _Worker:
         import optkin
 
         root = str(Path(optkin.__file__).resolve().parent.parent)
-        from optkin.problems.server import ServerError, fork_worker
-
-        p2c_r, p2c_w = os.pipe()
-        c2p_r, c2p_w = os.pipe()
-        self.stderr = tempfile.TemporaryFile()
-        try:
-            # forked ready by this user's worker server when one runs for this
-            # environment, else a new process that imports everything itself
+        # forked ready by this user's worker server when one runs for this environment,
+        # else a new process that imports everything itself
+        got = fork_from_server(env)
+        self.forked = got is not None
+        self.proc: Any
+        if got is not None:
+            self.proc, self.wfd, self.rfd, self.stderr = got
+        else:
+            p2c_r, p2c_w = os.pipe()
+            c2p_r, c2p_w = os.pipe()
+            self.stderr = tempfile.TemporaryFile()
             try:
-                self.proc: Any = fork_worker(env, p2c_r, c2p_w, self.stderr.fileno())
-            except ServerError:  # the ends went out: new ones for a worker of our own
-                for fd in (p2c_r, p2c_w, c2p_r, c2p_w):
-                    os.close(fd)
-                self.stderr.close()
-                p2c_r, p2c_w = os.pipe()
-                c2p_r, c2p_w = os.pipe()
-                self.stderr = tempfile.TemporaryFile()
-                self.proc = None
-            self.forked = self.proc is not None
-            if self.proc is None:
                 self.proc = subprocess.Popen(
                     [sys.executable, "-S", "-c", _BOOT, root, str(p2c_r), str(c2p_w),
                      str(os.getpid()), *_boot_path()],
                     pass_fds=(p2c_r, c2p_w), stdin=subprocess.DEVNULL,
                     stdout=subprocess.DEVNULL, stderr=self.stderr, env=env,
                     start_new_session=True)
-        finally:
-            os.close(p2c_r)
-            os.close(c2p_w)
-        self.wfd, self.rfd = p2c_w, c2p_r
+            finally:
+                os.close(p2c_r)
+                os.close(c2p_w)
+            self.wfd, self.rfd = p2c_w, c2p_r
         self.events = events
         self.job: Job | None = None
         self.deadline: float | None = None
