@@ -356,13 +356,22 @@ def start_server(batch: Path, cache: Path, runtime: Path, tmp: Path) -> int:
     if first is None:
         raise RuntimeError(f"optkin workers start: {out}")
     run_batch(batch, tmp, cache, runtime=runtime)
-    end = time.monotonic() + 120
+    pid = _handed_over(cache, runtime, first, 120.0)
+    if pid is None:
+        raise RuntimeError("the worker server did not warm up within 120 s")
+    return pid
+
+
+def _handed_over(cache: Path, runtime: Path, old: int | None, limit: float) -> int | None:
+    """The pid of the server that took over from ``old`` (its warmed copy), or None when
+    none did within ``limit`` seconds (a run that brought no new kind of work)."""
+    end = time.monotonic() + limit
     while time.monotonic() < end:
         pid = _server_pid(cache, runtime)
-        if pid is not None and pid != first:
+        if pid is not None and pid != old:
             return pid
         time.sleep(0.2)
-    raise RuntimeError("the worker server did not warm up within 120 s")
+    return None
 
 
 _SETUP_SERVED = """
@@ -560,9 +569,7 @@ def test_scaling(benchmark, tmp_path):
         # its runs are measured, as it would have after a user's first such run
         first = _server_pid(filled, runtime)
         run_batch(triv, tmp_path / "triv_prime", filled, runtime=runtime)
-        end = time.monotonic() + 60
-        while _server_pid(filled, runtime) == first and time.monotonic() < end:
-            time.sleep(0.2)
+        _handed_over(filled, runtime, first, 60.0)
         for k in range(FIXED_RUNS):
             for state in ("warm", "server"):
                 out = tmp_path / f"triv_{state}{k}"
@@ -580,9 +587,7 @@ def test_scaling(benchmark, tmp_path):
             with _local_cluster(2, filled) as cluster:
                 run_batch(batch, tmp_path / "prime_dask", filled, runtime=runtime,
                           scheduler=cluster.scheduler_address)
-            end = time.monotonic() + 60
-            while _server_pid(filled, runtime) == pid and time.monotonic() < end:
-                time.sleep(0.2)
+            _handed_over(filled, runtime, pid, 60.0)
         walls, same, units, parent_cpu, fixed_samples, sums, triv_cpu = benchmark.pedantic(
             measure, rounds=1, iterations=1)
         # the set-up of each topology in a worker forked by the (warmed) server
